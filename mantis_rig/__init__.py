@@ -1,0 +1,1 @@
+"""mantis_rig: ROS 2 software for the mantis-shrimp robot rig and its simulated twin."""

@@ -1,0 +1,206 @@
+"""Device interfaces of the rig: what a node may ask of a stage, a force DAQ and a camera trigger.
+
+Every quantity is SI (m, s, N, V). Each device has a real backend (hardware) and a simulated
+backend (driven by mantis_sim); nodes only see these interfaces. All devices are context
+managers: leaving the `with` block releases the device even after an error.
+"""
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+
+class DeviceError(RuntimeError):
+    """A device refused, timed out, replied with garbage or vanished. The message says which."""
+
+
+class ConfigurationError(ValueError):
+    """A setting is outside what the device or the rig's safety limits allow."""
+
+
+class SafetyLimitError(DeviceError):
+    """A safety limit (travel, speed, force ceiling) stopped the device."""
+
+
+class Device(abc.ABC):
+    """Common life cycle: open() acquires the device, close() releases it (idempotent)."""
+
+    @abc.abstractmethod
+    def open(self) -> None:
+        """Acquire the device (open the port or task) and check that it answers."""
+
+    @abc.abstractmethod
+    def close(self) -> None:
+        """Release the device. Safe to call twice and after a failed open()."""
+
+    def __enter__(self):
+        self.open()
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+
+# --- translation stage -----------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class StageInfo:
+    model: str
+    serial_number: str
+    firmware: str
+
+
+@dataclass(frozen=True)
+class StageState:
+    position_m: float
+    velocity_m_per_s: float
+    moving: bool
+    homed: bool
+    forward_limit: bool
+    reverse_limit: bool
+    fault: Optional[str] = None
+
+
+@dataclass(frozen=True)
+class StageLimits:
+    """Safety envelope enforced inside the driver layer, whatever the caller asks."""
+
+    min_position_m: float = 0.5e-3
+    max_position_m: float = 24.5e-3
+    max_speed_m_per_s: float = 2.4e-3
+    max_acceleration_m_per_s2: float = 4.0e-3
+
+    def check_position(self, position_m: float) -> None:
+        if not (self.min_position_m <= position_m <= self.max_position_m):
+            raise ConfigurationError(
+                f'stage position {position_m * 1e3:.4f} mm is outside the soft travel limits '
+                f'[{self.min_position_m * 1e3:.3f}, {self.max_position_m * 1e3:.3f}] mm')
+
+    def check_speed(self, speed_m_per_s: float) -> None:
+        if not (0.0 <= abs(speed_m_per_s) <= self.max_speed_m_per_s):
+            raise ConfigurationError(
+                f'stage speed {abs(speed_m_per_s) * 1e3:.4f} mm/s exceeds the ceiling '
+                f'{self.max_speed_m_per_s * 1e3:.3f} mm/s')
+
+
+class Stage(Device):
+    """A linear translation stage. Positive velocity increases the position."""
+
+    limits: StageLimits
+
+    @abc.abstractmethod
+    def identify(self) -> StageInfo: ...
+
+    @abc.abstractmethod
+    def home(self, timeout_s: float = 60.0) -> None:
+        """Home and block until homed; raise DeviceError on timeout or fault."""
+
+    @abc.abstractmethod
+    def move_to(self, position_m: float, speed_m_per_s: float, timeout_s: float = 60.0) -> None:
+        """Move to an absolute position at the given speed and block until it is reached."""
+
+    @abc.abstractmethod
+    def move_at(self, velocity_m_per_s: float) -> None:
+        """Start moving at a constant velocity (sign gives direction); returns at once."""
+
+    @abc.abstractmethod
+    def stop(self) -> None:
+        """Stop at once (abort). Never raises for an already stopped stage."""
+
+    @abc.abstractmethod
+    def state(self) -> StageState: ...
+
+
+# --- force DAQ --------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class DaqConfig:
+    channel: str = 'Dev1/ai0'
+    sample_rate_hz: float = 20_000.0
+    input_range_v: float = 10.0
+    newtons_per_volt: float = 11.12      # Futek IAA100 set to 10 V at 111 N (25 lb)
+    offset_v: float = 0.0                # tare: the voltage read with the tendon slack
+    block_size: int = 1000               # samples per read
+
+
+@dataclass(frozen=True)
+class ForceBlock:
+    """A block of consecutive samples: sample i was taken at t0_s + i * period_s."""
+
+    t0_s: float
+    period_s: float
+    force_n: np.ndarray
+    first_index: int                      # index of the first sample since start()
+    overrun: bool = False                 # samples were lost before this block
+
+
+class ForceDaq(Device):
+    max_sample_rate_hz: float
+
+    @abc.abstractmethod
+    def configure(self, config: DaqConfig) -> None:
+        """Validate and apply; raise ConfigurationError naming the value and the limit."""
+
+    @abc.abstractmethod
+    def start(self) -> None: ...
+
+    @abc.abstractmethod
+    def stop(self) -> None: ...
+
+    @abc.abstractmethod
+    def read_block(self, timeout_s: float = 1.0) -> ForceBlock:
+        """The next block of `block_size` samples, in order, none skipped."""
+
+    @abc.abstractmethod
+    def tare(self, duration_s: float = 0.2) -> float:
+        """Average the input for a while, make that zero force; return the new offset in V."""
+
+
+# --- camera trigger -----------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class CameraConfig:
+    frame_rate_hz: float = 19_000.0
+    pre_trigger_s: float = 0.05
+    post_trigger_s: float = 0.05
+
+
+@dataclass(frozen=True)
+class CameraStatus:
+    armed: bool
+    triggered: bool
+    trigger_time_s: Optional[float] = None
+
+
+@dataclass
+class MarkerFrames:
+    """Marker positions per frame, as the tracked trials in shared/data: mm, camera frame."""
+
+    time_s: np.ndarray                     # (n,)
+    markers_mm: dict = field(default_factory=dict)   # name -> (n, 2) array; mb1..mb3, ma1, ma2
+
+
+class CameraTrigger(Device):
+    max_frame_rate_hz: float
+
+    @abc.abstractmethod
+    def arm(self, config: CameraConfig) -> None: ...
+
+    @abc.abstractmethod
+    def trigger(self) -> float:
+        """Fire the trigger now; return its time in seconds (device clock)."""
+
+    @abc.abstractmethod
+    def status(self) -> CameraStatus: ...
+
+    def frame_timestamps(self) -> Optional[np.ndarray]:
+        """Frame times in seconds where the hardware reports them, else None."""
+        return None
+
+    def marker_frames(self) -> Optional[MarkerFrames]:
+        """Marker tracks of the recorded window where the backend has them (simulation)."""
+        return None

@@ -1,0 +1,53 @@
+"""ament_python package definition for mantis_rig (also installable with pip)."""
+from glob import glob
+import os
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'mantis_rig'
+
+
+def config_data_files():
+    """Install config/ under share/mantis_rig/config, keeping its sub-folders."""
+    entries = []
+    for folder, _, files in os.walk('config'):
+        yaml_files = [os.path.join(folder, f) for f in files if f.endswith(('.yaml', '.yml'))]
+        if yaml_files:
+            entries.append((os.path.join('share', PACKAGE, folder), yaml_files))
+    return entries
+
+
+NODES = {
+    'stage_node': 'mantis_rig.nodes.stage_node:main',
+    'loadcell_node': 'mantis_rig.nodes.loadcell_node:main',
+    'camera_node': 'mantis_rig.nodes.camera_node:main',
+    'supervisor_node': 'mantis_rig.nodes.supervisor_node:main',
+    'sim_world_node': 'mantis_rig.nodes.sim_world_node:main',
+    'replay_node': 'mantis_rig.nodes.replay_node:main',
+}
+EXISTING_NODES = [
+    f'{name} = {target}' for name, target in NODES.items()
+    if os.path.exists(os.path.join(*target.split(':')[0].split('.')) + '.py')
+]
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*', 'bench', 'bench.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
+        ('share/' + PACKAGE, ['package.xml']),
+        *config_data_files(),
+    ],
+    install_requires=['setuptools'],
+    extras_require={'nidaq': ['nidaqmx==1.7.0']},
+    zip_safe=True,
+    maintainer='mantis_rig maintainers',
+    maintainer_email='mantis-rig@example.org',
+    description='Mantis-shrimp robot rig: device nodes, logging, replay, analysis and simulation',
+    license='MIT',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': ['mantis = mantis_rig.cli:main', *EXISTING_NODES],
+    },
+)
