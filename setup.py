@@ -1,5 +1,4 @@
 """ament_python package definition for mantis_rig (also installable with pip)."""
-from glob import glob
 import os
 
 from setuptools import find_packages, setup

@@ -1,10 +1,36 @@
-"""The `mantis` command line."""
+"""The `mantis` command line: `mantis <command> --help` for each command."""
+from __future__ import annotations
+
+import argparse
 import sys
 
+from mantis_sim.model import SimulationError
+from mantis_sim.parameters import ParameterError
+from mantis_sim.scene import SceneError
 
-def main(argv=None):
-    print('mantis: not yet implemented', file=sys.stderr)
-    return 2
+from . import cli_sim
+
+USAGE_ERROR = 2
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog='mantis', description=__doc__)
+    commands = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
+    cli_sim.add_commands(commands)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.run(args) or 0
+    except (ParameterError, SceneError) as exc:
+        print(f'mantis {args.command}: {exc}', file=sys.stderr)
+        return USAGE_ERROR
+    except SimulationError as exc:
+        print(f'mantis {args.command}: simulation failed: {exc}', file=sys.stderr)
+        return 1
 
 
 if __name__ == '__main__':

@@ -1,0 +1,130 @@
+"""Phase boundaries of a strike from smoothed joint angles and rates.
+
+- loading start: θ1 first leaves its initial value by more than the detection threshold.
+- unlatching (I→II): the arm leaves the contact angle for good. θ3 while latched sits on a
+  floor (it may sag a little as the contact compresses); unlatching is the last time before
+  the strike that smoothed θ3 is within the threshold of its lowest pre-strike value.
+- overcentering (II→III): the tendon line c–d passes over the arm pivot b, i.e.
+  ∂l_t/∂θ3 = 0 ⇔ L1 sin(θ3 + β) + d_t sin(θ1 − θ3 − β) = 0 (model angles). The guide hole is
+  not tracked, so this needs the model θ1 (caller's θ1 reference) and the absolute θ3 (arm
+  axis). A trajectory-only estimate is offered too (:func:`trajectory_knee_time`).
+- max spring contraction (III→IV): θ̇1 crosses zero upwards just before the strike, θ1 is
+  minimal; located by linear interpolation between frames.
+- peak tip speed (end of IV): first maximum of |v_tip| after the start of IV.
+
+Thresholds are multiples of the noise of the smoothed signal, never absolute angles.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+DETECTION_SIGMAS = 5.0   # rates: against the noise of the smoothed rate
+LEVEL_SIGMAS = 3.0       # angle levels: against the per-frame angle noise
+
+
+@dataclass
+class PhaseTimes:
+    loading_start_s: float
+    unlatch_s: float
+    overcentering_s: float
+    max_contraction_s: float
+    peak_tip_speed_s: float
+    index_max_contraction: int
+    index_peak: int
+
+
+def _interp_crossing(t: np.ndarray, y: np.ndarray, i: int) -> float:
+    """Time where y crosses zero between samples i and i+1."""
+    y0, y1 = y[i], y[i + 1]
+    if y1 == y0:
+        return float(t[i])
+    return float(t[i] + (t[i + 1] - t[i]) * (-y0) / (y1 - y0))
+
+
+def strike_index(omega1_radps: np.ndarray) -> int:
+    """Sample of the peak body speed: the strike is the body's fastest motion."""
+    return int(np.argmax(omega1_radps))
+
+
+def max_contraction(t: np.ndarray, omega1_radps: np.ndarray, omega1_noise_radps: np.ndarray,
+                    i_strike: int) -> tuple[float, int]:
+    """Start of phase IV: the upward zero crossing of θ̇1 just before the strike.
+
+    A noisy zero crossing is located with a symmetric hysteresis band ±b, b =
+    DETECTION_SIGMAS × local rate noise: the last exit below −b before the strike and the
+    first exit above +b after it, each interpolated between frames; the crossing is their
+    midpoint. If the body rests a while at maximum contraction (θ̇1 ≈ 0 for some ms), this is
+    the centre of the rest; if it turns round at once, it is the crossing itself.
+    """
+    band = DETECTION_SIGMAS * omega1_noise_radps
+    loading = np.nonzero(omega1_radps[:i_strike] < -band[:i_strike])[0]
+    if len(loading) == 0:
+        raise ValueError('θ̇1 is never clearly negative before the strike: no loading seen')
+    i_neg = int(loading[-1])
+    t_neg = _interp_crossing(t, omega1_radps + band, i_neg)
+    rising = np.nonzero(omega1_radps[i_neg:i_strike + 1] > band[i_neg:i_strike + 1])[0]
+    i_pos = i_neg + int(rising[0])
+    t_pos = _interp_crossing(t, omega1_radps - band, i_pos - 1)
+    t_iv = 0.5 * (t_neg + t_pos)
+    return t_iv, int(np.argmin(np.abs(t - t_iv)))
+
+
+def loading_start(t: np.ndarray, theta1_s: np.ndarray, threshold_rad: float, i_end: int,
+                  n_ref: int) -> float:
+    """First time θ1 departs from its initial value (mean of the first n_ref samples)."""
+    ref = np.mean(theta1_s[:max(1, n_ref)])
+    moved = np.nonzero(np.abs(theta1_s[:i_end] - ref) > threshold_rad)[0]
+    return float(t[moved[0]]) if len(moved) else float(t[0])
+
+
+def unlatch_time(t: np.ndarray, theta3_s: np.ndarray, threshold_rad: float,
+                 i_start: int, i_end: int) -> float:
+    seg = theta3_s[i_start:i_end]
+    near_floor = np.nonzero(seg <= seg.min() + threshold_rad)[0]
+    return float(t[i_start + near_floor[-1]])
+
+
+def overcentering_residual(theta1_rad: np.ndarray, theta3_rad: np.ndarray, L1_mm: float,
+                           beta_rad: float, d_t_mm: float) -> np.ndarray:
+    """∝ ∂l_t/∂θ3 (mm): positive while the tendon holds the arm closed, zero at overcentering."""
+    return (L1_mm * np.sin(theta3_rad + beta_rad)
+            + d_t_mm * np.sin(theta1_rad - theta3_rad - beta_rad))
+
+
+def geometric_overcentering(t: np.ndarray, residual: np.ndarray, i_start: int,
+                            i_end: int) -> float:
+    """Last sign change of the overcentering residual in [i_start, i_end); NaN if none."""
+    s = np.sign(residual[i_start:i_end])
+    flips = np.nonzero(s[:-1] * s[1:] < 0)[0]
+    if len(flips) == 0:
+        return float('nan')
+    return _interp_crossing(t, residual, i_start + int(flips[-1]))
+
+
+def trajectory_knee_time(t: np.ndarray, theta1_s: np.ndarray, theta3_s: np.ndarray,
+                         i_start: int, i_end: int, n_candidates: int = 300) -> float:
+    """Overcentering estimate from the (θ1, θ3) path alone (no tendon geometry).
+
+    While the tendon holds the arm, θ3 follows the body's rotation at a near-constant rate;
+    past overcentering the tendon's opening moment grows with its moment arm, so the rate
+    grows. Fit θ3 = c + r·u + ½k·max(0, u − u_k)², u = body rotation since unlatching, and
+    return the time of the knee u_k. Weakly determined when the path bends gradually.
+    """
+    step = max(1, (i_end - i_start) // 5000)
+    u = -(theta1_s[i_start:i_end:step] - theta1_s[i_start])
+    y = theta3_s[i_start:i_end:step]
+    tt = t[i_start:i_end:step]
+    best = (np.inf, float('nan'))
+    for knee in np.linspace(u.min(), u.max(), n_candidates)[1:-1]:
+        x = np.column_stack([np.ones_like(u), u, 0.5 * np.maximum(0.0, u - knee) ** 2])
+        coef, *_ = np.linalg.lstsq(x, y, rcond=None)
+        sse = float(np.sum((x @ coef - y) ** 2))
+        if sse < best[0]:
+            best = (sse, float(tt[np.argmin(np.abs(u - knee))]))
+    return best[1]
+
+
+def peak_after(values: np.ndarray, i_from: int) -> int:
+    return i_from + int(np.argmax(values[i_from:]))

@@ -1,0 +1,96 @@
+"""`mantis sim`, `mantis scenes` and `mantis bench`: the simulated twin from the command line."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+import sys
+
+from mantis_sim.parameters import SECTIONS, describe
+from mantis_sim.results import simulate
+from mantis_sim.scene import EFFECTS, available_scenes, load_scene
+
+from . import sim_report
+
+
+def add_commands(commands) -> None:
+    sim = commands.add_parser('sim', help='simulate one trial of a scene')
+    sim.add_argument('--scene', required=True, help='scene name (see `mantis scenes`) or YAML path')
+    sim.add_argument('--set', dest='overrides', action='append', default=[],
+                     metavar='KEY=VALUE', help='override a parameter, e.g. drive.pull_speed_mm_'
+                     'per_s=1.2 or effects=[joint_damping]; repeatable')
+    sim.add_argument('--solver', help='integrator: RK45, RK23, DOP853, Radau, BDF, LSODA')
+    sim.add_argument('--rtol', type=float, help='relative tolerance')
+    sim.add_argument('--json', action='store_true', help='print the metrics as one JSON object')
+    sim.add_argument('--out', type=Path, help='write the trajectory as CSV to this file')
+    sim.add_argument('--plot', type=Path, help='write a PNG plot of the trial to this file')
+    sim.set_defaults(run=run_sim)
+
+    scenes = commands.add_parser('scenes', help='list scenes, effects and parameters')
+    scenes.add_argument('--params', action='store_true', help='also list every parameter')
+    scenes.set_defaults(run=run_scenes)
+
+    bench = commands.add_parser('bench', help='benchmarks that print figures')
+    bench.add_argument('which', choices=['accuracy'], help='accuracy: cost of accuracy per solver')
+    bench.add_argument('--scene', action='append', help='scene(s) (default air_23mm, water_23mm)')
+    bench.add_argument('--repeats', type=int, default=5, help='runs per point (median wall time)')
+    bench.add_argument('--plot', type=Path, help='PNG of the Pareto fronts')
+    bench.add_argument('--markdown', action='store_true', help='print tables as Markdown')
+    bench.set_defaults(run=run_bench)
+
+
+def _scene_from_args(args):
+    overrides = list(args.overrides)
+    if args.solver:
+        overrides.append(f'integration.solver={args.solver}')
+    if args.rtol is not None:
+        overrides.append(f'integration.rtol={args.rtol!r}')
+    return load_scene(args.scene, overrides)
+
+
+def run_sim(args) -> int:
+    scene = _scene_from_args(args)
+    result = simulate(scene)
+    if args.out:
+        sim_report.write_trajectory_csv(result, args.out)
+    if args.plot:
+        sim_report.plot_trial(result, args.plot)
+    if args.json:
+        metrics = {k: v for k, v in result.metrics.items()}
+        print(json.dumps(metrics))
+    else:
+        print(sim_report.summary_text(result))
+        for label, path in (('trajectory', args.out), ('plot', args.plot)):
+            if path:
+                print(f'{label}: {path}')
+    return 0
+
+
+def run_scenes(args) -> int:
+    for name, path in available_scenes().items():
+        scene = load_scene(str(path))
+        print(f'{name:22s} {" ".join(scene.description.split())}')
+        print(f'{"":22s} effects: {", ".join(sorted(scene.effects)) or "(none)"}')
+    print('\neffects a scene may enable:')
+    for name, doc in EFFECTS.items():
+        print(f'  {name:20s} {doc}')
+    if args.params:
+        print('\nparameters (section.key  default  unit  meaning):')
+        for section in SECTIONS:
+            for key, default, unit, doc in describe(section):
+                print(f'  {key:42s} {default!s:>10s} {unit:12s} {doc}')
+    return 0
+
+
+def run_bench(args) -> int:
+    from mantis_sim import benchmark
+    scenes = args.scene or ['air_23mm', 'water_23mm']
+    tables = {}
+    for name in scenes:
+        print(f'# {name}: converged reference ...', file=sys.stderr, flush=True)
+        tables[name] = benchmark.accuracy_table(name, repeats=args.repeats)
+        print(benchmark.format_table(tables[name], markdown=args.markdown))
+        print()
+    if args.plot:
+        benchmark.plot_tables(tables, args.plot)
+        print(f'plot: {args.plot}')
+    return 0

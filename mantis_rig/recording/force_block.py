@@ -1,0 +1,57 @@
+"""Force blocks: a run of load-cell samples with its first-sample time and sample period.
+
+Carried in the standard ``std_msgs/msg/Float64MultiArray`` with a fixed convention, so every ROS 2
+tool can open the bag without a custom interface package:
+
+* ``layout.data_offset = 2``: the first two elements are a block header, not samples
+  (``MultiArrayLayout.data_offset`` is documented as "padding elements at front of data");
+* ``data[0]`` = time of the first sample [s since the Unix epoch, float64: ~0.24 us resolution],
+  ``data[1]`` = sample period [s];
+* ``layout.dim[0]`` = ``{label: 'force_n', size: n, stride: n}``: ``data[2:]`` are n forces [N].
+
+Why not the alternatives: ``sensor_msgs/ChannelFloat32`` and a bare Float64MultiArray carry no
+time at all; ``sensor_msgs/LaserScan`` has a stamp and ``time_increment`` but tools would draw the
+forces as ranges of a laser scan; one ``WrenchStamped`` per sample means 20,000 messages/s.
+A dedicated ``mantis_rig_interfaces/msg/ForceBlock`` (Header + period + float64[]) is the clean
+long-term answer once the project has an interface package.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+FORCE_LABEL = 'force_n'
+HEADER_ELEMENTS = 2
+_NS_PER_S = 1e9
+
+
+@dataclass
+class ForceBlock:
+    t0_ns: int  # time of the first sample
+    period_ns: int
+    forces_n: np.ndarray
+
+
+def force_block_to_msg(t0_ns, period_ns, forces_n):
+    """A Float64MultiArray carrying ``forces_n`` [N] sampled from ``t0_ns`` every ``period_ns``."""
+    forces = np.asarray(forces_n, dtype=np.float64)
+    msg = Float64MultiArray()
+    msg.layout.data_offset = HEADER_ELEMENTS
+    msg.layout.dim = [MultiArrayDimension(label=FORCE_LABEL, size=forces.size,
+                                          stride=forces.size)]
+    data = np.empty(HEADER_ELEMENTS + forces.size)
+    data[0] = t0_ns / _NS_PER_S
+    data[1] = period_ns / _NS_PER_S
+    data[HEADER_ELEMENTS:] = forces
+    msg.data = data
+    return msg
+
+
+def force_block_from_msg(msg):
+    """Inverse of :func:`force_block_to_msg` (t0 rounded to the float64 resolution)."""
+    if msg.layout.data_offset != HEADER_ELEMENTS or not msg.layout.dim \
+            or msg.layout.dim[0].label != FORCE_LABEL:
+        raise ValueError('not a force block (expected data_offset 2 and dim[0] force_n)')
+    data = np.asarray(msg.data, dtype=np.float64)
+    return ForceBlock(t0_ns=round(data[0] * _NS_PER_S), period_ns=round(data[1] * _NS_PER_S),
+                      forces_n=data[HEADER_ELEMENTS:HEADER_ELEMENTS + msg.layout.dim[0].size])

@@ -1,0 +1,64 @@
+"""The tendon drive: how far the stage has pulled the tendon's far end (mm, ms).
+
+The tendon's free length between c and d is l_free(t) = l_free(0) - pulled(t).
+"""
+from __future__ import annotations
+
+import math
+
+from .scene import Scene
+
+
+class ConstantPull:
+    """The stage moves at constant speed from t = 0 (an ideal, instantaneous start)."""
+
+    def __init__(self, speed_mm_per_ms: float):
+        self.v = speed_mm_per_ms
+
+    def pulled(self, t: float) -> tuple[float, float, float]:
+        """(displacement mm, velocity mm/ms, acceleration mm/ms^2) at t ms."""
+        return self.v * t, self.v, 0.0
+
+    def breakpoints(self) -> list[float]:
+        return []
+
+
+class RampedPull:
+    """Effect stage_profile: the commanded velocity ramps up at a constant acceleration, and the
+    servo follows it with a first-order lag of time constant tau (the following error), so the
+    actual velocity obeys tau dv/dt + v = v_cmd(t)."""
+
+    def __init__(self, speed_mm_per_ms: float, accel_mm_per_ms2: float, tau_ms: float):
+        self.v, self.a, self.tau = speed_mm_per_ms, accel_mm_per_ms2, tau_ms
+        self.t_ramp = self.v / self.a if self.a > 0 else 0.0
+
+    def pulled(self, t: float) -> tuple[float, float, float]:
+        if t <= 0.0:
+            return 0.0, 0.0, 0.0
+        a, tau, tr = self.a, self.tau, self.t_ramp
+        if tau <= 0.0:
+            if t < tr:
+                return 0.5 * a * t * t, a * t, a
+            return 0.5 * a * tr * tr + self.v * (t - tr), self.v, 0.0
+        if t < tr:
+            decay = math.exp(-t / tau)
+            vel = a * (t - tau * (1.0 - decay))
+            pos = a * (0.5 * t * t - tau * t + tau * tau * (1.0 - decay))
+            return pos, vel, a * (1.0 - decay)
+        pos_r, vel_r, _ = self.pulled(tr) if tr > 0 else (0.0, 0.0, 0.0)
+        decay = math.exp(-(t - tr) / tau)
+        gap = vel_r - self.v
+        vel = self.v + gap * decay
+        pos = pos_r + self.v * (t - tr) + gap * tau * (1.0 - decay)
+        return pos, vel, -gap * decay / tau
+
+    def breakpoints(self) -> list[float]:
+        return [self.t_ramp] if self.t_ramp > 0 else []
+
+
+def make_drive(scene: Scene):
+    speed = scene.drive.pull_speed_mm_per_s * 1e-3
+    if scene.has('stage_profile') and speed > 0:
+        return RampedPull(speed, scene.drive.acceleration_mm_per_s2 * 1e-6,
+                          scene.drive.following_time_constant_ms)
+    return ConstantPull(speed)

@@ -1,0 +1,131 @@
+"""Generalised-force terms on q = (theta1, theta3), one per effect (N mm, ms).
+
+Each term returns (Q1, Q3, dissipated power in mJ/ms) and, if conservative, its potential
+energy (mJ). The model assembles only the terms its scene enables.
+"""
+from __future__ import annotations
+
+import math
+
+from .mechanism import Mechanism
+from .scene import Scene
+
+GRAVITY_MM_PER_MS2 = 9.807e-3
+
+
+class TorsionSpring:
+    """The energy store: V = 1/2 k (theta1 - theta1_0)^2, theta1_0 = pi + alpha. Always on."""
+
+    name = 'spring'
+
+    def __init__(self, scene: Scene):
+        self.k = scene.spring.k_Nmm_per_rad
+        self.rest = math.pi + math.radians(scene.geometry.alpha_deg)
+
+    def __call__(self, th1, th3, w1, w3):
+        return -self.k * (th1 - self.rest), 0.0, 0.0
+
+    def potential(self, th1, th3):
+        return 0.5 * self.k * (th1 - self.rest) ** 2
+
+
+class HingeStiffness:
+    name = 'hinge_stiffness'
+
+    def __init__(self, scene: Scene):
+        self.k = scene.hinge.k_Nmm_per_rad
+        self.rest = math.radians(scene.hinge.rest_angle_deg)
+
+    def __call__(self, th1, th3, w1, w3):
+        return 0.0, -self.k * (th3 - self.rest), 0.0
+
+    def potential(self, th1, th3):
+        return 0.5 * self.k * (th3 - self.rest) ** 2
+
+
+class JointDamping:
+    name = 'joint_damping'
+
+    def __init__(self, scene: Scene):
+        self.c1 = scene.damping.body_Nmm_ms_per_rad
+        self.c3 = scene.damping.arm_Nmm_ms_per_rad
+
+    def __call__(self, th1, th3, w1, w3):
+        return -self.c1 * w1, -self.c3 * w3, self.c1 * w1 * w1 + self.c3 * w3 * w3
+
+
+class Gravity:
+    """Gravity along `direction_deg` in the ground frame (x: pivot a towards guide hole d).
+    The rig's stage is vertical and the tendon leaves the base downwards, so -y by default."""
+
+    name = 'gravity'
+
+    def __init__(self, mech: Mechanism, direction_deg: float = -90.0):
+        self.mech = mech
+        g = GRAVITY_MM_PER_MS2
+        self.gx = g * math.cos(math.radians(direction_deg))
+        self.gy = g * math.sin(math.radians(direction_deg))
+
+    def __call__(self, th1, th3, w1, w3):
+        m = self.mech
+        c1, s1 = math.cos(th1), math.sin(th1)
+        psi = th1 - th3
+        cp, sp = math.cos(psi), math.sin(psi)
+        dp1 = (m.x1 * c1 - m.y1 * s1, m.x1 * s1 + m.y1 * c1)
+        dpsi = (-m.x2 * cp + m.y2 * sp, -m.x2 * sp - m.y2 * cp)
+        db = (-m.L1 * s1, m.L1 * c1)
+        q1 = (m.m1 * (self.gx * dp1[0] + self.gy * dp1[1])
+              + m.m2 * (self.gx * (db[0] + dpsi[0]) + self.gy * (db[1] + dpsi[1])))
+        q3 = -m.m2 * (self.gx * dpsi[0] + self.gy * dpsi[1])
+        return q1, q3, 0.0
+
+    def potential(self, th1, th3):
+        pts = self.mech.points(th1, th3)
+        m = self.mech
+        return -sum(mass * (self.gx * p[0] + self.gy * p[1])
+                    for mass, p in ((m.m1, pts['com_body']), (m.m2, pts['com_arm'])))
+
+
+class FluidDrag:
+    """Quadratic drag on the body plate, quasi-steady lift and drag on the arm blade.
+
+    Body: a plate of area S_b rotating about a feels -rho C_D S_b L1^3 |w1| w1 / 8 (strip
+    integral). Blade: at its centre of pressure r_cp = int r^3 / int r^2 over [L5, L3] (pure
+    rotation), C_L = 1.8 sin 2a and C_D = 0.4 + 3.0 sin^2 a (edge-on 0.4, broadside 3.4), a the
+    angle between the local velocity and the blade. Below the regularisation speed the angle of
+    attack is undefined; |v| is replaced by sqrt(|v|^2 + eps^2) so that every term stays smooth
+    and vanishes at rest.
+    """
+
+    name = 'fluid_drag'
+
+    def __init__(self, mech: Mechanism, scene: Scene):
+        rho = scene.medium.density_g_per_mm3
+        g = scene.geometry
+        self.mech = mech
+        self.body_coeff = rho * scene.body.drag_coefficient * scene.body.area_mm2 * g.L1_mm ** 3 / 8
+        self.half_rho_area = 0.5 * rho * scene.arm.blade_area_mm2
+        lo, hi = g.L5_mm, g.L3_mm
+        self.r_cp = 0.75 * (hi ** 4 - lo ** 4) / (hi ** 3 - lo ** 3)
+        self.eps_sq = scene.medium.regularisation_speed_m_per_s ** 2
+
+    def blade_force(self, th3, w1, w3):
+        """(F_along, F_normal) on the blade in N, with the Jacobian rows of the CP velocity."""
+        v_t, v_n, j_t, j_n = self.mech.arm_point_velocity(self.r_cp, th3, w1, w3)
+        speed = math.sqrt(v_t * v_t + v_n * v_n + self.eps_sq)
+        drag = self.half_rho_area * (0.4 + 3.0 * v_n * v_n / (speed * speed)) * speed
+        lift = self.half_rho_area * 3.6 * v_t * v_n / speed
+        f_t = -drag * v_t + lift * v_n
+        f_n = -drag * v_n - lift * v_t
+        return f_t, f_n, j_t, j_n, v_t, v_n
+
+    def __call__(self, th1, th3, w1, w3):
+        body = -self.body_coeff * abs(w1) * w1
+        f_t, f_n, j_t, j_n, v_t, v_n = self.blade_force(th3, w1, w3)
+        q1 = body + f_t * j_t[0] + f_n * j_n[0]
+        q3 = f_t * j_t[1] + f_n * j_n[1]
+        return q1, q3, -(body * w1 + f_t * v_t + f_n * v_n)
+
+
+def conservative_terms(terms) -> list:
+    return [t for t in terms if hasattr(t, 'potential')]

@@ -1,0 +1,361 @@
+"""Hybrid integration: continuous motion between events, discrete changes at them.
+
+Modes: latched or not (arm on the body), tendon taut or slack. Each mode has its own state
+vector and right-hand side (fewest unknowns: a latched arm on a taut rigid tendon has no
+freedom at all, so only the energy accumulators are integrated there). Events are located by the
+integrator's root-finding on its dense output: unlatch (lambda = 0), slack (F = 0),
+re-tension, re-contact, overcentering (dl_t/dtheta3 = 0), max spring contraction (dtheta1/dt = 0)
+and peak tip speed (d|v_tip|/dt = 0). Every event ends the segment; the next segment starts in
+the mode and phase the event leads to.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import math
+import time
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from .model import Dynamics, Model, SimulationError
+from .scene import Scene
+
+PHASES = ('I', 'II', 'III', 'IV')
+# A re-contact or re-tension is declared only past this overlap (rad or mm), so that the
+# integrator's rounding right after a release cannot be mistaken for a new contact.
+EVENT_OVERLAP = 1e-9
+# A slack rigid tendon counts as separated (no longer grazing) below this stretch, mm.
+SEPARATION = 1e-7
+MAX_EVENTS_AT_ONE_INSTANT = 12
+STATE_SCALE = (1.0, 1.0, 1.0, 1.0, 100.0, 100.0)   # rad, rad, rad/ms, rad/ms, mJ, mJ
+
+
+@dataclass
+class Mode:
+    latched: bool
+    taut: bool
+
+
+@dataclass
+class Segment:
+    """Samples of one stretch of continuous motion (full states, one row per solver step)."""
+
+    phase: str
+    latched: bool
+    taut: bool
+    t: np.ndarray
+    states: np.ndarray            # columns: th1, th3, w1, w3, W_drive, E_dissipated
+    dense: object = None          # callable t -> full state row, if dense output was asked
+
+
+@dataclass
+class RawRun:
+    scene: Scene
+    model: Model
+    segments: list
+    events: list = field(default_factory=list)     # (name, t_ms, full state)
+    phase_start_ms: dict = field(default_factory=dict)
+    peak_time_ms: float = math.nan
+    wall_time_s: float = 0.0
+    energy0_mJ: float = 0.0
+    solver_steps: int = 0
+
+
+class HybridSimulator:
+    def __init__(self, scene: Scene, dense: bool = False):
+        self.scene = scene
+        self.model = Model(scene)
+        integ = scene.integration
+        self.method, self.rtol, self.atol_scale = integ.solver, integ.rtol, integ.atol_scale
+        self.t_end = integ.t_end_s * 1e3
+        self.post_peak = integ.post_peak_ms
+        self.dense = dense
+        self._cache_key = None
+        self._cache_value = None
+
+    # --- mode systems ---------------------------------------------------------------------------
+    def _constrained(self, mode: Mode) -> bool:
+        return mode.latched and mode.taut and self.model.rigid
+
+    def _dynamics(self, mode: Mode, t, y) -> Dynamics:
+        key = (mode.latched, mode.taut, t, *y)
+        if key == self._cache_key:
+            return self._cache_value
+        m = self.model
+        if self._constrained(mode):
+            d = m.latched_constrained(t)
+        elif mode.latched:
+            d = m.latched_free(t, y[0], y[1], mode.taut)
+        else:
+            d = m.unlatched(t, y[0], y[1], y[2], y[3], mode.taut)
+        self._cache_key, self._cache_value = key, d
+        return d
+
+    def _pack(self, mode: Mode, s):
+        if self._constrained(mode):
+            return [s[4], s[5]]
+        if mode.latched:
+            return [s[0], s[2], s[4], s[5]]
+        return list(s)
+
+    def _unpack(self, mode: Mode, t, y) -> tuple:
+        d = self._dynamics(mode, t, y)
+        if self._constrained(mode):
+            return (d.th1, d.th3, d.w1, 0.0, y[0], y[1])
+        if mode.latched:
+            return (y[0], d.th3, y[1], 0.0, y[2], y[3])
+        return tuple(y)
+
+    def _rhs(self, mode: Mode):
+        dyn = self._dynamics
+        if self._constrained(mode):
+            def rhs(t, y):
+                d = dyn(mode, t, tuple(y))
+                return [d.stage_power, d.loss_power]
+        elif mode.latched:
+            def rhs(t, y):
+                d = dyn(mode, t, tuple(y))
+                return [d.w1, d.a1, d.stage_power, d.loss_power]
+        else:
+            def rhs(t, y):
+                d = dyn(mode, t, tuple(y))
+                return [d.w1, d.w3, d.a1, d.a3, d.stage_power, d.loss_power]
+        return rhs
+
+    def _events(self, mode: Mode, phase: str, after_peak: bool, start_stretch: float):
+        m, dyn = self.model, self._dynamics
+        events = []
+
+        def event(name, direction, fn):
+            def g(t, y):
+                return fn(t, tuple(y))
+            g.terminal, g.direction, g.__name__ = True, direction, name
+            events.append(g)
+
+        if mode.latched:
+            event('unlatch', -1, lambda t, y: dyn(mode, t, y).contact_torque_Nmm)
+        else:
+            phi = m.contact_angle
+            event('recontact', -1, lambda t, y: y[1] - phi + EVENT_OVERLAP)
+        if m.unilateral:
+            def stretch(t, y):
+                th3 = m.contact_angle if mode.latched else y[1]
+                return m.mech.tendon_length(y[0], th3) - m.free_length(t)[0]
+
+            if m.rigid and mode.taut:
+                event('slack', -1, lambda t, y: dyn(mode, t, y).tension_N)
+            elif m.rigid and not mode.latched and start_stretch > -SEPARATION:
+                # Grazing: the tendon is at zero stretch but would have to push. It is taut
+                # again as soon as the tension it would need turns positive; only once it has
+                # really separated does the stretch itself decide.
+                taut = Mode(False, True)
+                event('separate', -1, lambda t, y: stretch(t, y) + SEPARATION)
+                event('retension', 1, lambda t, y: dyn(taut, t, y).tension_N)
+            elif m.rigid:
+                threshold = max(start_stretch, 0.0) + EVENT_OVERLAP
+                event('retension', 1, lambda t, y: stretch(t, y) - threshold)
+            elif mode.taut:
+                event('slack', -1, stretch)
+            else:
+                event('retension', 1, stretch)
+        if not mode.latched and not after_peak:
+            if phase == 'II':
+                event('overcenter', -1, lambda t, y: m.mech.tendon(y[0], y[1]).d3)
+            elif phase == 'III':
+                event('max_contraction', 1, lambda t, y: y[2])
+            elif phase == 'IV':
+                def tip_rate(t, y):
+                    d = dyn(mode, t, y)
+                    return m.mech.tip_power_rate(d.th3, d.w1, d.w3, d.a1, d.a3)
+                event('peak', -1, tip_rate)
+        return events
+
+    # --- transitions ----------------------------------------------------------------------------
+    def _settle(self, mode: Mode, t, s, phase):
+        """Leave modes whose multipliers already have the wrong sign; advance phases whose
+        condition already holds. Returns the (possibly changed) phase."""
+        m = self.model
+        for _ in range(4):
+            d = self._dynamics(mode, t, tuple(self._pack(mode, s)))
+            if self._constrained(mode) or (m.rigid and mode.taut and not mode.latched):
+                if m.unilateral and d.tension_N < 0.0:
+                    mode.taut = False
+                    self.run_data.events.append(('slack', t, s))
+                    continue
+            if mode.latched and d.contact_torque_Nmm < 0.0:
+                mode.latched = False
+                self.run_data.events.append(('unlatch', t, s))
+                phase = self._advance(phase, 'II', t)
+                continue
+            break
+        if not mode.latched:
+            if phase == 'II' and m.mech.tendon(s[0], s[1]).d3 <= 0.0:
+                phase = self._advance(phase, 'III', t)
+            if phase == 'III' and s[2] >= 0.0:
+                phase = self._advance(phase, 'IV', t)
+        return phase
+
+    def _advance(self, phase: str, new_phase: str, t: float) -> str:
+        if PHASES.index(new_phase) == PHASES.index(phase) + 1:
+            self.run_data.phase_start_ms[new_phase] = t
+            return new_phase
+        return phase
+
+    def _impact(self, mode: Mode, t, s):
+        """Re-contact of the arm on the body: restitution, or re-latching when slow."""
+        m = self.model
+        th1, th3, w1, w3, work, lost = s
+        th3 = m.contact_angle
+        mass = m.mech.mass(th3)
+        ke_before = mass.kinetic_energy(w1, w3)
+        target_w3 = -m.restitution * w3
+        latch = abs(target_w3) <= m.latch_speed
+        if latch:
+            target_w3 = 0.0
+        tendon_impulse = 0.0
+        if m.rigid and mode.taut:
+            # both constraints hold after the impact: the velocity is fixed by them
+            tg = m.mech.tendon(th1, th3)
+            l_free_dot = m.free_length(t)[1]
+            new_w1 = (l_free_dot - tg.d3 * target_w3) / tg.d1
+            new_w3 = target_w3
+            # impulse split: M dw = -grad_l P_t + e3 P_c; the first row gives P_t
+            dw1, dw3 = new_w1 - w1, new_w3 - w3
+            tendon_impulse = -(mass.m11 * dw1 + mass.m12 * dw3) / tg.d1
+            work -= tendon_impulse * l_free_dot
+        else:
+            u1, u3 = mass.solve(0.0, 1.0)
+            impulse = (target_w3 - w3) / u3
+            new_w1, new_w3 = w1 + u1 * impulse, w3 + u3 * impulse
+        ke_after = mass.kinetic_energy(new_w1, new_w3)
+        lost += ke_before - ke_after + (work - s[4])
+        mode.latched = latch
+        return (th1, th3, new_w1, new_w3, work, lost)
+
+    def _retension(self, mode: Mode, t, s):
+        """A slack rigid tendon snaps taut: an inelastic impulse along grad l_t."""
+        m = self.model
+        th1, th3, w1, w3, work, lost = s
+        tg = m.mech.tendon(th1, th3)
+        l_free_dot = m.free_length(t)[1]
+        mass = m.mech.mass(th3)
+        ke_before = mass.kinetic_energy(w1, w3)
+        if mode.latched:
+            new_w1, new_w3 = l_free_dot / tg.d1, 0.0
+            impulse = -mass.m11 * (new_w1 - w1) / tg.d1
+        else:
+            u1, u3 = mass.solve(tg.d1, tg.d3)
+            impulse = (tg.d1 * w1 + tg.d3 * w3 - l_free_dot) / (tg.d1 * u1 + tg.d3 * u3)
+            new_w1, new_w3 = w1 - u1 * impulse, w3 - u3 * impulse
+        work -= impulse * l_free_dot
+        lost += ke_before - mass.kinetic_energy(new_w1, new_w3) + (work - s[4])
+        mode.taut = True
+        return (th1, th3, new_w1, new_w3, work, lost)
+
+    # --- main loop ------------------------------------------------------------------------------
+    def initial_state(self):
+        m, scene = self.model, self.scene
+        th1 = scene.initial.theta1_rad
+        th3_deg = scene.initial.theta3_deg
+        th3 = m.contact_angle if th3_deg is None else math.radians(th3_deg)
+        latched = abs(th3 - m.contact_angle) < 1e-12
+        tension, contact = m.initial_tension(th1, th3)
+        if latched and (tension < 0 or contact < 0):
+            raise SimulationError(
+                f'the start pose theta1 = {th1:.4f} rad, theta3 = {math.degrees(th3):.2f} deg is '
+                f'not held by the tendon and the latch (static tension {tension:.3f} N, contact '
+                f'torque {contact:.3f} N mm: both must be >= 0)')
+        length = m.mech.tendon_length(th1, th3)
+        m.l_free0 = length if m.rigid else length - max(tension, 0.0) / m.k_t
+        return Mode(latched=latched, taut=True), (th1, th3, 0.0, 0.0, 0.0, 0.0)
+
+    def run(self) -> RawRun:
+        start = time.perf_counter()
+        mode, s = self.initial_state()
+        self.run_data = run = RawRun(self.scene, self.model, segments=[],
+                                     phase_start_ms={'I': 0.0})
+        t, phase, after_peak, stop_at = 0.0, 'I', False, self.t_end
+        phase = self._settle(mode, t, s, phase)
+        # An ideal drive starts at full speed: the state at t = 0+ already moves with it.
+        s = self._unpack(mode, t, tuple(self._pack(mode, s)))
+        run.energy0_mJ = self.energy(mode, t, s)
+        breakpoints = sorted(b for b in self.model.drive.breakpoints() if 0 < b < self.t_end)
+        same_instant, last_t = 0, -1.0
+        while t < stop_at:
+            horizon = min([stop_at] + [b for b in breakpoints if b > t + 1e-12])
+            name, t_new, s = self._segment(mode, phase, after_peak, t, s, horizon)
+            same_instant = same_instant + 1 if t_new - last_t < 1e-9 else 0
+            if same_instant > MAX_EVENTS_AT_ONE_INSTANT:
+                raise SimulationError(f'events keep firing at t = {t_new:.9f} ms '
+                                      f'(last: {name}); the contact or tendon is chattering')
+            last_t, t = t_new, t_new
+            if name is None or name == 'separate':
+                continue
+            run.events.append((name, t, s))
+            if name == 'unlatch':
+                mode.latched = False
+                phase = self._advance(phase, 'II', t)
+            elif name == 'slack':
+                mode.taut = False
+            elif name == 'retension':
+                s = self._retension(mode, t, s) if self.model.rigid else s
+                mode.taut = True
+            elif name == 'recontact':
+                s = self._impact(mode, t, s)
+            elif name == 'overcenter':
+                phase = self._advance(phase, 'III', t)
+            elif name == 'max_contraction':
+                phase = self._advance(phase, 'IV', t)
+            elif name == 'peak':
+                run.peak_time_ms, after_peak = t, True
+                stop_at = min(self.t_end, t + self.post_peak)
+            phase = self._settle(mode, t, s, phase)
+        run.wall_time_s = time.perf_counter() - start
+        return run
+
+    def _segment(self, mode: Mode, phase, after_peak, t0, s, t1):
+        if self._constrained(mode):
+            # l_t(theta1) = l_free has two roots: start Newton from where the body is now
+            self.model.theta1_guess = s[0]
+        y0 = self._pack(mode, s)
+        scale = STATE_SCALE[4:] if self._constrained(mode) else (
+            (1.0, 1.0, 100.0, 100.0) if mode.latched else STATE_SCALE)
+        atol = [self.rtol * self.atol_scale * x for x in scale]
+        m = self.model
+        start_stretch = m.mech.tendon_length(s[0], s[1]) - m.free_length(t0)[0]
+        events = self._events(mode, phase, after_peak, start_stretch)
+        sol = solve_ivp(self._rhs(mode), (t0, t1), y0, method=self.method, rtol=self.rtol,
+                        atol=atol, events=events, dense_output=self.dense)
+        if sol.status == -1:
+            raise SimulationError(f'integration failed at t = {sol.t[-1]:.6f} ms in phase '
+                                  f'{phase}: {sol.message}')
+        self.run_data.solver_steps += len(sol.t) - 1
+        frozen = Mode(mode.latched, mode.taut)
+        states = np.array([self._unpack(frozen, ti, yi) for ti, yi in zip(sol.t, sol.y.T)])
+        dense = None
+        if self.dense and sol.sol is not None:
+            dense = _DenseSegment(self, frozen, sol.sol)
+        self.run_data.segments.append(Segment(phase, mode.latched, mode.taut, sol.t, states,
+                                              dense))
+        name = None
+        if sol.status == 1:
+            fired = [ev.__name__ for ev, te in zip(events, sol.t_events) if len(te)]
+            name = fired[0]
+        return name, float(sol.t[-1]), tuple(states[-1])
+
+    def energy(self, mode: Mode, t, s) -> float:
+        """Mechanical energy: kinetic + potential (+ compliant tendon), mJ."""
+        return (self.model.kinetic_energy(s[1], s[2], s[3])
+                + self.model.potential_energy(s[0], s[1], t))
+
+    def dynamics_at(self, segment: Segment, t, s) -> Dynamics:
+        mode = Mode(segment.latched, segment.taut)
+        return self._dynamics(mode, t, tuple(self._pack(mode, s)))
+
+
+class _DenseSegment:
+    def __init__(self, sim: HybridSimulator, mode: Mode, interpolant):
+        self.sim, self.mode, self.interpolant = sim, mode, interpolant
+
+    def __call__(self, t: float) -> tuple:
+        return self.sim._unpack(self.mode, t, tuple(self.interpolant(t)))

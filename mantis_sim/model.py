@@ -1,0 +1,202 @@
+"""The assembled equations of motion of one scene, in each contact/tendon mode.
+
+M(q) qddot + c(q, qdot) = Q_applied(q, qdot) - F grad l_t(q) + lambda e3
+
+- F >= 0 is the tendon tension; with a rigid tendon it is the multiplier of the moving
+  constraint l_t(q) = l_free(t), with a compliant one F = k_t (l_t - l_free) + c_t d/dt(...).
+- lambda >= 0 is the contact torque holding the arm on the body (latched: theta3 = phi_c).
+
+The rigid constraint is kept in full coordinates with its multiplier (index reduction plus a
+Baumgarte correction). Its Jacobian grad l_t = (l_1, l_3) keeps full rank through overcentering
+(l_3 = 0), where reduced coordinates with theta1 independent would divide by l_3.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+
+from .drive import make_drive
+from .forces import FluidDrag, Gravity, HingeStiffness, JointDamping, TorsionSpring
+from .mechanism import Mechanism
+from .scene import Scene
+
+MECHANICAL_EFFECTS = ('gravity', 'joint_damping', 'hinge_stiffness', 'fluid_drag', 'added_mass',
+                      'tendon_slack', 'contact_restitution', 'stage_profile')
+
+
+class SimulationError(RuntimeError):
+    """The model cannot go on (inconsistent start, no convergence); says where and why."""
+
+
+@dataclass(frozen=True)
+class Dynamics:
+    """Everything the model knows at one instant (g, mm, ms, rad; N, N mm, mJ/ms)."""
+
+    th1: float
+    th3: float
+    w1: float
+    w3: float
+    a1: float
+    a3: float
+    tension_N: float
+    contact_torque_Nmm: float
+    stage_power: float          # F * stage velocity: work done by the drive
+    loss_power: float           # dissipated by damping, drag and tendon damping
+
+
+class Model:
+    def __init__(self, scene: Scene):
+        self.scene = scene
+        self.mech = Mechanism(scene)
+        self.drive = make_drive(scene)
+        self.terms = [TorsionSpring(scene)]
+        if scene.has('hinge_stiffness'):
+            self.terms.append(HingeStiffness(scene))
+        if scene.has('joint_damping'):
+            self.terms.append(JointDamping(scene))
+        if scene.has('gravity'):
+            self.terms.append(Gravity(self.mech))
+        if scene.has('fluid_drag'):
+            self.terms.append(FluidDrag(self.mech, scene))
+        self.effects = tuple(e for e in MECHANICAL_EFFECTS if scene.has(e))
+        self.rigid = scene.tendon.model == 'rigid'
+        self.unilateral = scene.has('tendon_slack')
+        self.k_t = scene.tendon.stiffness_N_per_mm
+        self.c_t = scene.tendon.damping_N_ms_per_mm
+        self.restitution = scene.contact.restitution if scene.has('contact_restitution') else 0.0
+        self.latch_speed = scene.contact.latch_speed_rad_per_s * 1e-3
+        self.contact_angle = self.mech.contact_angle
+        self.kappa = scene.integration.baumgarte_per_ms
+        self.l_free0 = math.nan
+        self.rhs_evals = 0
+        self.theta1_guess = scene.initial.theta1_rad
+
+    # --- drive --------------------------------------------------------------------------------
+    def free_length(self, t: float) -> tuple[float, float, float]:
+        pulled, v, a = self.drive.pulled(t)
+        return self.l_free0 - pulled, -v, -a
+
+    # --- applied forces -----------------------------------------------------------------------
+    def applied(self, th1, th3, w1, w3):
+        q1 = q3 = loss = 0.0
+        for term in self.terms:
+            f1, f3, p = term(th1, th3, w1, w3)
+            q1 += f1
+            q3 += f3
+            loss += p
+        return q1, q3, loss
+
+    def potential_energy(self, th1, th3, t=None) -> float:
+        energy = sum(term.potential(th1, th3) for term in self.terms if hasattr(term, 'potential'))
+        if not self.rigid and t is not None:
+            stretch = self.mech.tendon_length(th1, th3) - self.free_length(t)[0]
+            if stretch > 0 or not self.unilateral:
+                energy += 0.5 * self.k_t * stretch * stretch
+        return energy
+
+    def spring_energy(self, th1) -> float:
+        return self.terms[0].potential(th1, 0.0)
+
+    def compliant_tension(self, tg, w1, w3, t, taut: bool):
+        """(F, tendon damping loss) of the compliant tendon."""
+        if not taut:
+            return 0.0, 0.0
+        l_free, l_free_dot, _ = self.free_length(t)
+        stretch = tg.length - l_free
+        rate = tg.d1 * w1 + tg.d3 * w3 - l_free_dot
+        tension = self.k_t * stretch + self.c_t * rate
+        if self.unilateral and tension < 0.0:
+            tension = 0.0
+        return tension, (tension - self.k_t * stretch) * rate
+
+    # --- modes ----------------------------------------------------------------------------------
+    def latched_constrained(self, t: float) -> Dynamics:
+        """Latched arm, taut rigid tendon: no freedom left; theta1 follows from l_free(t)."""
+        self.rhs_evals += 1
+        th3 = self.contact_angle
+        l_free, l_free_dot, l_free_ddot = self.free_length(t)
+        th1 = self.solve_theta1(l_free, th3)
+        tg = self.mech.tendon(th1, th3)
+        w1 = l_free_dot / tg.d1
+        a1 = (l_free_ddot - tg.d11 * w1 * w1) / tg.d1
+        m = self.mech.mass(th3)
+        q1, q3, loss = self.applied(th1, th3, w1, 0.0)
+        c1, c3 = m.velocity_terms(w1, 0.0)
+        tension = (q1 - c1 - m.m11 * a1) / tg.d1
+        contact = m.m12 * a1 + c3 - q3 + tg.d3 * tension
+        return Dynamics(th1, th3, w1, 0.0, a1, 0.0, tension, contact, -tension * l_free_dot, loss)
+
+    def latched_free(self, t, th1, w1, taut: bool) -> Dynamics:
+        """Latched arm, tendon slack or compliant: theta1 is the one freedom."""
+        self.rhs_evals += 1
+        th3 = self.contact_angle
+        m = self.mech.mass(th3)
+        q1, q3, loss = self.applied(th1, th3, w1, 0.0)
+        tension = 0.0
+        if not self.rigid:
+            tg = self.mech.tendon(th1, th3)
+            tension, tendon_loss = self.compliant_tension(tg, w1, 0.0, t, taut)
+            q1 -= tension * tg.d1
+            q3 -= tension * tg.d3
+            loss += tendon_loss
+        c1, c3 = m.velocity_terms(w1, 0.0)
+        a1 = (q1 - c1) / m.m11
+        contact = m.m12 * a1 + c3 - q3
+        return Dynamics(th1, th3, w1, 0.0, a1, 0.0, tension, contact,
+                        -tension * self.free_length(t)[1], loss)
+
+    def unlatched(self, t, th1, th3, w1, w3, taut: bool) -> Dynamics:
+        """Arm free of the body; rigid taut tendon as a constraint, else a force (or none)."""
+        self.rhs_evals += 1
+        m = self.mech.mass(th3)
+        q1, q3, loss = self.applied(th1, th3, w1, w3)
+        c1, c3 = m.velocity_terms(w1, w3)
+        f1, f3 = q1 - c1, q3 - c3
+        tension = 0.0
+        l_free_dot = self.free_length(t)[1]
+        if self.rigid and taut:
+            tg = self.mech.tendon(th1, th3)
+            l_free, l_free_dot, l_free_ddot = self.free_length(t)
+            rate_error = tg.d1 * w1 + tg.d3 * w3 - l_free_dot
+            curvature = tg.d11 * w1 * w1 + 2 * tg.d13 * w1 * w3 + tg.d33 * w3 * w3
+            k = self.kappa
+            gamma = (l_free_ddot - curvature - 2 * k * rate_error
+                     - k * k * (tg.length - l_free))
+            u1, u3 = m.solve(tg.d1, tg.d3)
+            a1_free, a3_free = m.solve(f1, f3)
+            tension = ((tg.d1 * a1_free + tg.d3 * a3_free - gamma)
+                       / (tg.d1 * u1 + tg.d3 * u3))
+            a1, a3 = a1_free - u1 * tension, a3_free - u3 * tension
+        else:
+            if not self.rigid:
+                tg = self.mech.tendon(th1, th3)
+                tension, tendon_loss = self.compliant_tension(tg, w1, w3, t, taut)
+                f1 -= tension * tg.d1
+                f3 -= tension * tg.d3
+                loss += tendon_loss
+            a1, a3 = m.solve(f1, f3)
+        return Dynamics(th1, th3, w1, w3, a1, a3, tension, 0.0, -tension * l_free_dot, loss)
+
+    # --- helpers --------------------------------------------------------------------------------
+    def solve_theta1(self, l_target: float, th3: float) -> float:
+        """theta1 with l_t(theta1, th3) = l_target, by Newton from the last solution."""
+        th1 = self.theta1_guess
+        for _ in range(50):
+            tg = self.mech.tendon(th1, th3)
+            step = (tg.length - l_target) / tg.d1
+            th1 -= step
+            if abs(step) < 1e-14:
+                self.theta1_guess = th1
+                return th1
+        raise SimulationError(f'the latched pose cannot reach tendon length {l_target:.6f} mm '
+                              f'(Newton on theta1 did not converge near {th1:.6f} rad)')
+
+    def initial_tension(self, th1: float, th3: float) -> tuple[float, float]:
+        """Static tension F and contact torque lambda holding the start pose (latched, at rest)."""
+        tg = self.mech.tendon(th1, th3)
+        q1, q3, _ = self.applied(th1, th3, 0.0, 0.0)
+        tension = q1 / tg.d1
+        return tension, tension * tg.d3 - q3
+
+    def kinetic_energy(self, th3, w1, w3) -> float:
+        return self.mech.mass(th3).kinetic_energy(w1, w3)

@@ -1,0 +1,139 @@
+"""Trajectory and metrics of a simulated trial (internal units g, mm, ms; reported in SI)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from typing import Optional
+
+import numpy as np
+
+from .hybrid import PHASES, HybridSimulator, RawRun
+from .scene import Scene
+
+
+@dataclass
+class Trajectory:
+    """One row per integrator step and event; time in ms, angles rad, rates rad/ms."""
+
+    t_ms: np.ndarray
+    theta1: np.ndarray
+    theta3: np.ndarray
+    omega1: np.ndarray
+    omega3: np.ndarray
+    tendon_force_N: np.ndarray
+    contact_torque_Nmm: np.ndarray
+    phase: np.ndarray              # 'I'..'IV' per sample
+    tip_speed_mps: np.ndarray
+    spring_energy_mJ: np.ndarray
+    kinetic_energy_mJ: np.ndarray
+    drive_work_mJ: np.ndarray
+    dissipated_mJ: np.ndarray
+    balance_residual_mJ: np.ndarray
+    tendon_length_mm: np.ndarray
+    free_length_mm: np.ndarray
+
+
+@dataclass
+class SimulationResult:
+    scene: Scene
+    trajectory: Trajectory
+    metrics: dict
+    events: list
+    raw: RawRun
+
+    def to_json_dict(self) -> dict:
+        return dict(self.metrics)
+
+    def state_at(self, t_ms: float) -> Optional[tuple]:
+        """Interpolated (th1, th3, w1, w3) at t_ms, when simulated with dense output."""
+        for seg in self.raw.segments:
+            if seg.t[0] <= t_ms <= seg.t[-1] and seg.dense is not None:
+                return seg.dense(t_ms)[:4]
+        return None
+
+
+def simulate(scene: Scene, dense: bool = False) -> SimulationResult:
+    sim = HybridSimulator(scene, dense=dense)
+    raw = sim.run()
+    trajectory = _trajectory(sim, raw)
+    metrics = _metrics(sim, raw, trajectory)
+    return SimulationResult(scene, trajectory, metrics, raw.events, raw)
+
+
+def _trajectory(sim: HybridSimulator, raw: RawRun) -> Trajectory:
+    model, mech = sim.model, sim.model.mech
+    rows = []
+    for seg in raw.segments:
+        for t, s in zip(seg.t, seg.states):
+            d = sim.dynamics_at(seg, t, s)
+            rows.append((t, *s[:4], d.tension_N, d.contact_torque_Nmm, seg.phase,
+                         mech.tip_speed(s[1], s[2], s[3]), model.spring_energy(s[0]),
+                         model.kinetic_energy(s[1], s[2], s[3]), s[4], s[5],
+                         sim.energy(None, t, s), mech.tendon_length(s[0], s[1]),
+                         model.free_length(t)[0]))
+    cols = list(zip(*rows))
+    arr = [np.asarray(c, dtype=float) for i, c in enumerate(cols) if i != 7]
+    (t, th1, th3, w1, w3, force, contact, tip, spring, kinetic, work, lost, energy, length,
+     free) = arr
+    residual = (energy - raw.energy0_mJ) - (work - lost)
+    return Trajectory(t, th1, th3, w1, w3, force, contact, np.asarray(cols[7]), tip, spring,
+                      kinetic, work, lost, residual, length, free)
+
+
+def _event_time(raw: RawRun, name: str) -> Optional[float]:
+    return next((t for n, t, _ in raw.events if n == name), None)
+
+
+def _metrics(sim: HybridSimulator, raw: RawRun, tr: Trajectory) -> dict:
+    model, mech = sim.model, sim.model.mech
+    starts = {p: raw.phase_start_ms.get(p) for p in PHASES}
+    peak_t = raw.peak_time_ms if not math.isnan(raw.peak_time_ms) else None
+    ends = {'I': starts['II'], 'II': starts['III'], 'III': starts['IV'], 'IV': peak_t}
+    durations = {p: (ends[p] - starts[p]) * 1e-3
+                 if starts[p] is not None and ends[p] is not None else None for p in PHASES}
+    peak_state = next((s for n, _, s in raw.events if n == 'peak'), None)
+    peak_tip = mech.tip_speed(*peak_state[1:4]) if peak_state else float(tr.tip_speed_mps.max())
+    arm_share = None
+    tendon_work_iv = None
+    if peak_state is not None:
+        total = model.kinetic_energy(*peak_state[1:4])
+        arm_share = 1.0 - mech.body_kinetic_energy(peak_state[2]) / total if total > 0 else None
+        iv_state = next((s for n, _, s in raw.events if n == 'max_contraction'), None)
+        if iv_state is not None:
+            tendon_work_iv = peak_state[4] - iv_state[4]
+    strike = tr.phase == 'IV'
+    return {
+        'scene': raw.scene.name,
+        'peak_tip_speed_mps': peak_tip,
+        'max_spring_energy_mJ': float(tr.spring_energy_mJ.max()),
+        'peak_tendon_force_N': float(tr.tendon_force_N.max()),
+        'phase_start_s': {p: (v * 1e-3 if v is not None else None) for p, v in starts.items()},
+        'phase_duration_s': durations,
+        'peak_time_s': peak_t * 1e-3 if peak_t is not None else None,
+        'strike_reached': peak_t is not None,
+        'peak_body_speed_radps': float(np.abs(tr.omega1).max() * 1e3),
+        'peak_arm_speed_radps': float(np.abs(tr.omega3).max() * 1e3),
+        'peak_body_speed_in_strike_radps': float(np.abs(tr.omega1[strike]).max() * 1e3)
+        if strike.any() else None,
+        'arm_kinetic_energy_share_at_peak': arm_share,
+        'tendon_work_phase_IV_mJ': tendon_work_iv,
+        'energy_balance_residual_mJ': float(np.abs(tr.balance_residual_mJ).max()),
+        'max_constraint_drift_mm': _constraint_drift(raw, tr),
+        'events': [(n, t * 1e-3) for n, t, _ in raw.events],
+        'wall_time_s': raw.wall_time_s,
+        'rhs_evals': model.rhs_evals,
+        'solver_steps': raw.solver_steps,
+        'effects': list(model.effects),
+        'solver': sim.method,
+        'rtol': sim.rtol,
+    }
+
+
+def _constraint_drift(raw: RawRun, tr: Trajectory) -> float:
+    """Largest |l_t - l_free| while a rigid tendon was taut (mm); 0 for a compliant tendon."""
+    if not raw.model.rigid:
+        return 0.0
+    taut = np.concatenate([np.full(len(seg.t), seg.taut) for seg in raw.segments])
+    if not taut.any():
+        return 0.0
+    return float(np.abs(tr.tendon_length_mm - tr.free_length_mm)[taut].max())

@@ -1,0 +1,201 @@
+"""Scenes: the rig's geometry, parameters, medium, drive and the effects to simulate, from YAML."""
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, replace
+import os
+from pathlib import Path
+from typing import Optional
+
+import yaml
+
+from .parameters import (
+    SECTIONS,
+    Arm,
+    Body,
+    Camera,
+    Contact,
+    Damping,
+    Drive,
+    Geometry,
+    Hinge,
+    Initial,
+    Integration,
+    LoadCell,
+    Medium,
+    ParameterError,
+    Spring,
+    Tendon,
+    build_section,
+)
+
+# Each effect is a term of the model or of a sensor, assembled only when a scene enables it.
+EFFECTS = {
+    'gravity': 'gravity on both bodies (tiny: ~0.05 mJ against ~100 mJ of spring energy)',
+    'joint_damping': 'viscous damping on theta1 and theta3',
+    'hinge_stiffness': 'weak arm hinge spring pulling theta3 towards theta3h',
+    'fluid_drag': 'quadratic drag on the body; quasi-steady lift and drag on the arm blade',
+    'added_mass': 'entrained fluid inertia of body and arm blade (configuration dependent)',
+    'tendon_slack': 'the tendon cannot push: it goes slack when its tension would turn negative',
+    'contact_restitution': 'the arm rebounds on re-contact (otherwise re-contact is plastic)',
+    'stage_profile': 'stage acceleration ramp and servo following error',
+    'loadcell_dynamics': 'amplifier bandwidth, noise and ADC quantisation of the force signal',
+    'camera_sampling': 'pixel quantisation of the tracked markers',
+}
+
+
+class SceneError(ValueError):
+    """A scene cannot be found or parsed; the message names the file and the problem."""
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str
+    description: str
+    effects: frozenset
+    geometry: Geometry = Geometry()
+    body: Body = Body()
+    arm: Arm = Arm()
+    spring: Spring = Spring()
+    hinge: Hinge = Hinge()
+    damping: Damping = Damping()
+    medium: Medium = Medium()
+    tendon: Tendon = Tendon()
+    contact: Contact = Contact()
+    drive: Drive = Drive()
+    initial: Initial = Initial()
+    loadcell: LoadCell = LoadCell()
+    camera: Camera = Camera()
+    integration: Integration = Integration()
+
+    def has(self, effect: str) -> bool:
+        return effect in self.effects
+
+    def with_overrides(self, assignments: Iterable[str]) -> Scene:
+        """Apply `section.key=value` strings (values parsed as YAML scalars)."""
+        scene = self
+        for text in assignments:
+            key, sep, raw = text.partition('=')
+            if not sep:
+                raise ParameterError(f'override {text!r} is not of the form section.key=value')
+            scene = scene.with_values({key.strip(): _parse_scalar(raw)})
+        return scene
+
+    def with_values(self, values: dict) -> Scene:
+        """Apply {'section.key': value} (or 'effects': [...]) and re-validate."""
+        scene = self
+        for key, value in values.items():
+            if key == 'effects':
+                scene = replace(scene, effects=_effects(value, scene.name))
+                continue
+            section, _, name = key.partition('.')
+            if section not in SECTIONS or not name:
+                raise ParameterError(f'unknown key {key!r}; keys are section.name with section '
+                                     f'one of: {", ".join(SECTIONS)}, or effects')
+            updated = build_section(section, {name: value}, getattr(scene, section))
+            scene = replace(scene, **{section: updated})
+        _check_consistency(scene)
+        return scene
+
+
+def _parse_scalar(raw: str):
+    """A command-line value as YAML, but '1e-6' is a number (YAML 1.1 wants '1.0e-6')."""
+    try:
+        value = yaml.safe_load(raw)
+    except yaml.YAMLError:
+        return raw
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            return value
+    return value
+
+
+def _effects(value, where: str) -> frozenset:
+    if not isinstance(value, (list, tuple)):
+        raise ParameterError(f'{where}: effects must be a list, got {value!r}')
+    unknown = [e for e in value if e not in EFFECTS]
+    if unknown:
+        raise ParameterError(f'{where}: unknown effect(s) {", ".join(map(str, unknown))}; '
+                             f'valid effects: {", ".join(EFFECTS)}')
+    return frozenset(value)
+
+
+def _check_consistency(scene: Scene) -> None:
+    g = scene.geometry
+    if g.L5_mm >= g.L3_mm:
+        raise ParameterError(f'geometry.L5_mm = {g.L5_mm} must be below geometry.L3_mm = '
+                             f'{g.L3_mm} (the blade lies between L5 and the tip)')
+    needs_fluid = scene.effects & {'fluid_drag', 'added_mass'}
+    if needs_fluid and scene.medium.density_g_per_mm3 <= 0:
+        raise ParameterError(f'effects {", ".join(sorted(needs_fluid))} need '
+                             f'medium.density_g_per_mm3 > 0 (got 0)')
+    theta3 = scene.initial.theta3_deg
+    if theta3 is not None and theta3 < g.contact_angle_deg:
+        raise ParameterError(f'initial.theta3_deg = {theta3} is inside the body: it must be '
+                             f'>= geometry.contact_angle_deg = {g.contact_angle_deg}')
+
+
+def scene_from_dict(data, name: str = '<scene>') -> Scene:
+    if not isinstance(data, dict):
+        raise SceneError(f'{name}: a scene must be a YAML mapping, got {type(data).__name__}')
+    data = dict(data)
+    scene_name = data.pop('name', name)
+    description = data.pop('description', '')
+    effects = _effects(data.pop('effects', []), scene_name)
+    sections = {}
+    for key, value in data.items():
+        if key not in SECTIONS:
+            raise ParameterError(f'{scene_name}: unknown section {key!r}; valid sections: '
+                                 f'name, description, effects, {", ".join(SECTIONS)}')
+        sections[key] = build_section(key, value or {})
+    scene = Scene(name=str(scene_name), description=str(description), effects=effects,
+                  **sections)
+    _check_consistency(scene)
+    return scene
+
+
+def load_scene_file(path: Path) -> Scene:
+    try:
+        data = yaml.safe_load(Path(path).read_text())
+    except yaml.YAMLError as exc:
+        raise SceneError(f'{path}: not valid YAML: {exc}') from None
+    except OSError as exc:
+        raise SceneError(f'{path}: cannot read: {exc.strerror}') from None
+    try:
+        return scene_from_dict(data, Path(path).stem)
+    except ParameterError as exc:
+        raise ParameterError(f'{path}: {exc}') from None
+
+
+def scene_dirs() -> list[Path]:
+    """Where scenes are looked up: $MANTIS_SCENE_PATH, the installed share dir, the source tree."""
+    dirs = [Path(p) for p in os.environ.get('MANTIS_SCENE_PATH', '').split(os.pathsep) if p]
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        dirs.append(Path(get_package_share_directory('mantis_rig')) / 'config' / 'scenes')
+    except Exception:  # noqa: BLE001 - not installed through ament: fall back to the tree
+        pass
+    dirs.append(Path(__file__).resolve().parent.parent / 'config' / 'scenes')
+    return [d for d in dirs if d.is_dir()]
+
+
+def available_scenes() -> dict[str, Path]:
+    found: dict[str, Path] = {}
+    for folder in reversed(scene_dirs()):
+        for path in sorted(folder.glob('*.yaml')):
+            found[path.stem] = path
+    return dict(sorted(found.items()))
+
+
+def load_scene(name_or_path: str, overrides: Optional[Iterable[str]] = None) -> Scene:
+    """A scene by name (see `mantis scenes`) or by path to a YAML file, with overrides applied."""
+    path = Path(name_or_path)
+    if not (path.suffix in ('.yaml', '.yml') and path.exists()):
+        scenes = available_scenes()
+        if name_or_path not in scenes:
+            raise SceneError(f'unknown scene {name_or_path!r}; available scenes: '
+                             f'{", ".join(scenes) or "(none found)"}')
+        path = scenes[name_or_path]
+    return load_scene_file(path).with_overrides(overrides or [])

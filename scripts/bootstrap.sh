@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# Create (or reuse) the project virtual environment .venv with the pinned dependencies and
+# mantis_rig installed in it (editable). Safe to run again: it reinstalls only when
+# requirements.txt, setup.py or the node list changed.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+python_bin="${PYTHON:-}"
+if [ -z "$python_bin" ]; then
+  for candidate in python3.11 python3; do
+    if command -v "$candidate" >/dev/null 2>&1; then python_bin="$candidate"; break; fi
+  done
+fi
+version="$("$python_bin" -c 'import sys; print("%d.%d" % sys.version_info[:2])')"
+if [ "$version" != "3.11" ]; then
+  echo "bootstrap: need Python 3.11 (the ROS 2 Jazzy wheels are built for it); $python_bin is $version" >&2
+  exit 1
+fi
+
+if [ ! -x .venv/bin/python ]; then
+  echo "bootstrap: creating .venv with $python_bin" >&2
+  "$python_bin" -m venv .venv
+fi
+stamp=.venv/.mantis-installed
+wanted="$(cat requirements.txt setup.py; ls mantis_rig/nodes 2>/dev/null || true)"
+wanted="$(printf '%s' "$wanted" | sha256sum | cut -d' ' -f1)"
+if [ "$(cat "$stamp" 2>/dev/null || true)" != "$wanted" ]; then
+  echo "bootstrap: installing pinned dependencies into .venv" >&2
+  .venv/bin/python -m pip install --quiet --disable-pip-version-check --upgrade pip
+  .venv/bin/python -m pip install --quiet --disable-pip-version-check -r requirements.txt
+  .venv/bin/python -m pip install --quiet --disable-pip-version-check --no-deps -e .
+  echo "$wanted" > "$stamp"
+fi

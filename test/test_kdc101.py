@@ -1,0 +1,455 @@
+"""The real KDC101 stage backend against an emulated KDC101 on a pseudo-terminal."""
+import re
+import threading
+import time
+
+from fakes.kdc101_emulator import (
+    HW_START_UPDATEMSGS,
+    MOD_SET_CHANENABLESTATE,
+    MOT_MOVE_ABSOLUTE,
+    MOT_MOVE_HOME,
+    MOT_MOVE_VELOCITY,
+    Kdc101Emulator,
+)
+import pytest
+import serial
+
+from mantis_rig.hardware.apt_units import (
+    Z8_COUNTS_PER_MM,
+    Z8_DATASHEET_COUNTS_PER_MM,
+    AptScale,
+)
+from mantis_rig.hardware.interfaces import ConfigurationError, DeviceError, SafetyLimitError
+from mantis_rig.hardware.kdc101 import Kdc101Stage
+
+pytestmark = pytest.mark.timeout(30)
+
+MM = 1e-3
+
+
+def kdc101_threads():
+    return [t for t in threading.enumerate() if t.name.startswith('kdc101')]
+
+
+@pytest.fixture(autouse=True)
+def nothing_left_running():
+    yield
+    assert kdc101_threads() == [], 'a driver or emulator thread outlived the test'
+
+
+@pytest.fixture
+def make_emulator():
+    emulators = []
+
+    def make(**kwargs):
+        emulators.append(Kdc101Emulator(**kwargs).start())
+        return emulators[-1]
+
+    yield make
+    for emulator in emulators:
+        emulator.close()
+        assert not emulator.thread_alive
+
+
+@pytest.fixture
+def make_stage():
+    stages = []
+
+    def make(port, open_=True, **kwargs):
+        options = dict(reply_timeout_s=1.0, stop_timeout_s=1.0, status_timeout_s=1.5)
+        options.update(kwargs)
+        stages.append(Kdc101Stage(port, **options))
+        if open_:
+            stages[-1].open()
+        return stages[-1]
+
+    yield make
+    for stage in stages:
+        stage.close()
+
+
+def assert_link_closed(stage):
+    assert stage._port is None
+    assert not [t for t in threading.enumerate() if t.name.startswith('kdc101-io')]
+
+
+def wait_until(condition, timeout_s=5.0):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.02)
+    return False
+
+
+# --- unit conversions -----------------------------------------------------------------------
+
+def test_scale_follows_the_protocol_definition_for_the_z8():
+    scale = AptScale()
+    assert scale.counts_per_mm == 34554.96
+    assert scale.velocity_per_mm_s == pytest.approx(772981.4, abs=0.1)
+    assert scale.acceleration_per_mm_s2 == pytest.approx(263.84, abs=0.005)
+    assert scale.position_to_counts(10 * MM) == 345550
+    assert scale.velocity_to_units(1 * MM) == 772981
+    assert scale.velocity_to_units(2.4 * MM) == round(2.4 * 772981.37)
+    assert scale.acceleration_to_units(4 * MM) == round(4 * 263.8443)
+    assert scale.counts_to_position_m(34555) == pytest.approx(1.0000012 * MM, rel=1e-7)
+    assert scale.units_to_velocity_m_per_s(772981) == pytest.approx(1 * MM, rel=1e-6)
+
+
+def test_datasheet_counts_per_mm_rescales_everything():
+    scale = AptScale(Z8_DATASHEET_COUNTS_PER_MM)
+    ratio = 34304 / 34554.96
+    assert scale.position_to_counts(1 * MM) == 34304
+    assert scale.velocity_per_mm_s == pytest.approx(772981.4 * ratio, rel=1e-6)
+    assert scale.acceleration_per_mm_s2 == pytest.approx(263.84 * ratio, rel=1e-4)
+
+
+def test_explicit_scales_override_the_derived_ones():
+    stage = Kdc101Stage('/dev/null', counts_per_mm=Z8_COUNTS_PER_MM,
+                        velocity_per_mm_s=700000.0, acceleration_per_mm_s2=250.0)
+    assert stage.scale.velocity_to_units(1 * MM) == 700000
+    assert stage.scale.acceleration_to_units(2 * MM) == 500
+    with pytest.raises(ValueError, match='counts_per_mm'):
+        AptScale(0.0)
+
+
+def test_datasheet_counts_per_mm_reaches_the_controller(make_emulator, make_stage):
+    emu = make_emulator(position_mm=2.0, homed=True)
+    stage = make_stage(emu.port, counts_per_mm=34304)
+    stage.move_to(3 * MM, 2.4 * MM)
+    # the emulated actuator really has 34,554.96 counts/mm: the data sheet figure is short
+    assert emu.position_mm == pytest.approx(3 * 34304 / 34554.96, abs=1e-4)
+    assert stage.state().position_m == pytest.approx(3 * MM, abs=1e-7)
+    assert emu.velparams['max_velocity'] == round(2.4 * 772981.37 * 34304 / 34554.96)
+
+
+# --- commands -------------------------------------------------------------------------------
+
+def test_open_identifies_enables_and_starts_status_updates(make_emulator, make_stage):
+    emu = make_emulator(position_mm=7.25)
+    stage = make_stage(emu.port)
+    info = stage.identify()
+    assert (info.model, info.serial_number, info.firmware) == ('KDC101', '27000123', '3.0.10')
+    assert MOD_SET_CHANENABLESTATE in emu.received and HW_START_UPDATEMSGS in emu.received
+    state = stage.state()
+    assert state.position_m == pytest.approx(7.25 * MM, abs=1e-7)
+    assert (state.moving, state.homed, state.forward_limit, state.reverse_limit) == (
+        False, False, False, False)
+    assert state.fault is None
+
+
+def test_keepalive_keeps_status_updates_coming(make_emulator, make_stage):
+    emu = make_emulator(ack_timeout_s=1.0)
+    stage = make_stage(emu.port, keepalive_period_s=0.3)
+    time.sleep(2.5)
+    assert emu.acks_received >= 3
+    assert emu.sending_status
+    sent = emu.status_sent
+    assert wait_until(lambda: emu.status_sent > sent, 2.0)
+    assert stage.state().position_m == pytest.approx(5 * MM, abs=1e-7)
+
+
+def test_emulator_stops_status_updates_without_acks(make_emulator):
+    emu = make_emulator(ack_timeout_s=0.5)
+    with serial.Serial(emu.port, 115200, timeout=0.1) as port:
+        port.write(bytes([0x11, 0x00, 0x00, 0x00, 0x50, 0x01]))     # HW_START_UPDATEMSGS
+        assert len(port.read(20)) == 20
+        assert wait_until(lambda: not emu.sending_status, 3.0)
+        time.sleep(0.3)
+        port.reset_input_buffer()
+        assert port.read(20) == b''
+
+
+def test_missing_status_updates_end_the_link(make_emulator, make_stage):
+    emu = make_emulator(ack_timeout_s=0.5)
+    stage = make_stage(emu.port, keepalive_period_s=30.0, status_timeout_s=1.0)
+    assert wait_until(lambda: stage._failure is not None, 5.0)
+    with pytest.raises(DeviceError, match=r'no status update .* for \d+\.\d s \(limit 1 s\)'):
+        stage.state()
+    assert_link_closed(stage)
+
+
+def test_home(make_emulator, make_stage):
+    emu = make_emulator(position_mm=3.0)
+    stage = make_stage(emu.port)
+    stage.home(timeout_s=10.0)
+    assert MOT_MOVE_HOME in emu.received
+    state = stage.state()
+    assert state.homed and not state.moving
+    assert state.position_m == pytest.approx(0.0, abs=1e-7)
+    assert emu.position_mm == pytest.approx(0.0, abs=1e-6)
+
+
+def test_move_to_sets_velocity_and_arrives(make_emulator, make_stage):
+    emu = make_emulator(position_mm=2.0, homed=True)
+    stage = make_stage(emu.port)
+    stage.move_to(3.0 * MM, 2.4 * MM, timeout_s=10.0)
+    assert MOT_MOVE_ABSOLUTE in emu.received
+    assert emu.velparams == {'min_velocity': 0, 'acceleration': round(4 * 263.8443),
+                             'max_velocity': round(2.4 * 772981.37)}
+    assert emu.position_mm == pytest.approx(3.0, abs=1e-4)
+    state = stage.state()
+    assert state.position_m == pytest.approx(3.0 * MM, abs=1e-7)
+    assert not state.moving and state.fault is None
+
+
+def test_move_needs_a_homed_stage(make_emulator, make_stage):
+    emu = make_emulator(position_mm=2.0, homed=False)
+    stage = make_stage(emu.port)
+    with pytest.raises(DeviceError, match='not homed'):
+        stage.move_to(3.0 * MM, 1 * MM)
+    with pytest.raises(DeviceError, match='not homed'):
+        stage.move_at(1 * MM)
+    assert MOT_MOVE_ABSOLUTE not in emu.received and MOT_MOVE_VELOCITY not in emu.received
+
+
+@pytest.mark.parametrize('velocity_mm_s', [2.0, -2.0])
+def test_move_at_then_stop(make_emulator, make_stage, velocity_mm_s):
+    emu = make_emulator(position_mm=10.0, homed=True)
+    stage = make_stage(emu.port)
+    stage.move_at(velocity_mm_s * MM)
+    assert wait_until(lambda: abs(stage.state().position_m - 10 * MM) > 0.2 * MM)
+    state = stage.state()
+    assert state.moving
+    assert state.velocity_m_per_s == pytest.approx(velocity_mm_s * MM, abs=0.1 * MM)
+    stage.stop()
+    assert not emu.moving
+    stopped_mm = emu.position_mm
+    assert (stopped_mm - 10.0) * velocity_mm_s > 0
+    time.sleep(0.3)
+    assert emu.position_mm == stopped_mm
+    assert wait_until(lambda: not stage.state().moving, 2.0)
+
+
+def test_move_at_zero_stops_and_stop_is_harmless_when_stopped(make_emulator, make_stage):
+    emu = make_emulator(position_mm=10.0, homed=True)
+    stage = make_stage(emu.port)
+    stage.stop()
+    stage.stop()
+    stage.move_at(1 * MM)
+    assert wait_until(lambda: emu.moving, 2.0)
+    stage.move_at(0.0)
+    assert not emu.moving
+
+
+# --- configuration refused at call time -----------------------------------------------------
+
+@pytest.mark.parametrize('call, pattern', [
+    (lambda s: s.move_to(5 * MM, 2.5 * MM), r'2\.5000 mm/s .* 2\.400 mm/s'),
+    (lambda s: s.move_at(-3 * MM), r'3\.0000 mm/s .* 2\.400 mm/s'),
+    (lambda s: s.move_to(30 * MM, 1 * MM), r'30\.0000 mm .* \[0\.500, 24\.500\] mm'),
+    (lambda s: s.move_to(0.2 * MM, 1 * MM), r'0\.2000 mm .* \[0\.500, 24\.500\] mm'),
+    (lambda s: s.move_to(5 * MM, 0.0), r'0\.0000 mm/s must be positive'),
+])
+def test_bad_configuration_is_refused(make_emulator, make_stage, call, pattern):
+    emu = make_emulator(position_mm=10.0, homed=True)
+    stage = make_stage(emu.port)
+    with pytest.raises(ConfigurationError, match=pattern):
+        call(stage)
+    assert MOT_MOVE_ABSOLUTE not in emu.received and MOT_MOVE_VELOCITY not in emu.received
+    assert not emu.moving
+
+
+def test_move_at_outward_beyond_a_soft_limit_is_refused(make_emulator, make_stage):
+    emu = make_emulator(position_mm=0.0, homed=True)
+    stage = make_stage(emu.port)
+    with pytest.raises(ConfigurationError, match=r'0\.0000 mm, at or beyond .* 0\.500 mm'):
+        stage.move_at(-1 * MM)
+    assert MOT_MOVE_VELOCITY not in emu.received
+    stage.move_to(1 * MM, 2.4 * MM)        # moving back inside the envelope is allowed
+    assert emu.position_mm == pytest.approx(1.0, abs=1e-4)
+
+
+# --- limits during motion -------------------------------------------------------------------
+
+@pytest.mark.parametrize('start_mm, velocity_mm_s, limit_mm', [
+    (24.3, 1.0, 24.5), (0.7, -1.0, 0.5)])
+def test_velocity_move_stops_at_the_soft_limit(make_emulator, make_stage,
+                                               start_mm, velocity_mm_s, limit_mm):
+    emu = make_emulator(position_mm=start_mm, homed=True)
+    stage = make_stage(emu.port)
+    stage.move_at(velocity_mm_s * MM)
+    assert wait_until(lambda: stage.state().fault is not None, 5.0)
+    assert wait_until(lambda: not emu.moving, 2.0)
+    state = stage.state()
+    assert f'passed the soft travel limit {limit_mm:.3f} mm' in state.fault
+    assert 'stage stopped' in state.fault
+    overshoot_mm = (emu.position_mm - limit_mm) * velocity_mm_s
+    assert 0.0 < overshoot_mm < 0.5          # stopped well before the hardware switch
+    assert not (state.forward_limit or state.reverse_limit)
+
+
+def test_hardware_limit_during_move_to_raises_and_stops(make_emulator, make_stage):
+    emu = make_emulator(position_mm=10.0, homed=True)
+    stage = make_stage(emu.port)
+    emu.limit_switch_at(10.5, forward=True)
+    with pytest.raises(SafetyLimitError,
+                       match=r'forward hardware limit switch hit at 10\.5000 mm during the '
+                             r'move to 12\.0000 mm; stage stopped'):
+        stage.move_to(12 * MM, 2.4 * MM, timeout_s=10.0)
+    assert not emu.moving
+    assert emu.position_mm == pytest.approx(10.5, abs=1e-4)
+    assert stage.state().forward_limit
+    stage.move_to(10 * MM, 2.4 * MM, timeout_s=10.0)     # the link survives; back off the switch
+    assert emu.position_mm == pytest.approx(10.0, abs=1e-4)
+    assert not stage.state().forward_limit
+
+
+def test_hardware_limit_during_velocity_move_is_reported(make_emulator, make_stage):
+    emu = make_emulator(position_mm=10.0, homed=True)
+    stage = make_stage(emu.port)
+    emu.limit_switch_at(9.7, forward=False)
+    stage.move_at(-2 * MM)
+    assert wait_until(lambda: stage.state().fault is not None, 5.0)
+    state = stage.state()
+    assert 'reverse hardware limit switch hit at 9.7000 mm' in state.fault
+    assert state.reverse_limit and not state.moving
+    assert not emu.moving
+
+
+# --- faults ---------------------------------------------------------------------------------
+
+def test_no_reply_at_open(make_emulator, make_stage):
+    emu = make_emulator()
+    emu.mute()
+    stage = make_stage(emu.port, open_=False, reply_timeout_s=0.3)
+    with pytest.raises(DeviceError,
+                       match=r'no HW_GET_INFO reply to HW_REQ_INFO from the KDC101 on '
+                             + re.escape(emu.port) + r' within 0\.3 s; port closed'):
+        stage.open()
+    assert_link_closed(stage)
+
+
+def test_move_timeout_stops_the_stage_and_closes(make_emulator, make_stage):
+    emu = make_emulator(position_mm=2.0, homed=True)
+    stage = make_stage(emu.port)
+    with pytest.raises(DeviceError,
+                       match=r'no MOT_MOVE_COMPLETED for the move to 4\.0000 mm .* within '
+                             r'0\.4 s; port closed'):
+        stage.move_to(4 * MM, 0.5 * MM, timeout_s=0.4)
+    assert_link_closed(stage)
+    assert wait_until(lambda: not emu.moving, 2.0), 'the stage was left moving'
+
+
+def test_device_falling_silent_mid_move(make_emulator, make_stage):
+    emu = make_emulator(position_mm=10.0, homed=True)
+    stage = make_stage(emu.port, status_timeout_s=0.8)
+    stage.move_at(1 * MM)
+    emu.mute()
+    with pytest.raises(DeviceError, match=r'no status update from the KDC101'):
+        assert wait_until(lambda: stage.state() is None, 5.0)
+    assert_link_closed(stage)
+
+
+def test_garbled_reply(make_emulator, make_stage):
+    emu = make_emulator()
+    stage = make_stage(emu.port)
+    emu.garble_next()
+    with pytest.raises(DeviceError, match=r'garbled reply from the KDC101: unknown message '
+                                          r'0x5aa5 \(header bytes a5 5a de ad be ef\)'):
+        stage.identify()
+    assert_link_closed(stage)
+    with pytest.raises(DeviceError, match='garbled'):
+        stage.state()
+
+
+def test_garbled_status_update_while_idle(make_emulator, make_stage):
+    emu = make_emulator()
+    stage = make_stage(emu.port)
+    emu.garble_next(replies_only=False)
+    with pytest.raises(DeviceError, match='garbled reply'):
+        assert wait_until(lambda: stage.state() is None, 5.0)
+    assert_link_closed(stage)
+
+
+def test_truncated_reply(make_emulator, make_stage):
+    emu = make_emulator()
+    stage = make_stage(emu.port, frame_timeout_s=0.3)
+    emu.truncate_next(keep_bytes=10)
+    with pytest.raises(DeviceError, match=r'truncated HW_GET_INFO message from the KDC101: '
+                                          r'got 4 of 84 data bytes within 0\.3 s'):
+        stage.identify()
+    assert_link_closed(stage)
+
+
+def test_truncated_header(make_emulator, make_stage):
+    emu = make_emulator(position_mm=2.0, homed=True)
+    stage = make_stage(emu.port, frame_timeout_s=0.3)
+    emu.truncate_next(keep_bytes=3)
+    with pytest.raises(DeviceError, match=r'truncated message header from the KDC101: got 3 '
+                                          r'of 6 bytes'):
+        stage.move_to(3 * MM, 1 * MM)
+    assert_link_closed(stage)
+
+
+def test_too_short_message_is_a_clear_error_not_a_struct_error(make_stage, make_emulator):
+    emu = make_emulator()
+    stage = make_stage(emu.port)
+    emu.shorten_next(data_bytes=4)          # the next status update carries 4 of 14 data bytes
+    with pytest.raises(DeviceError, match=r'malformed MOT_GET_DCSTATUSUPDATE message from the '
+                                          r'KDC101 \(4 data bytes: 91 04 04 00 81 50'):
+        assert wait_until(lambda: stage.state() is None, 5.0)
+    assert_link_closed(stage)
+
+
+def test_port_vanishing_mid_move(make_emulator, make_stage):
+    emu = make_emulator(position_mm=10.0, homed=True)
+    stage = make_stage(emu.port)
+    stage.move_at(1 * MM)
+    emu.vanish()
+    with pytest.raises(DeviceError, match=r'KDC101 port .* (vanished|failed while sending)'):
+        assert wait_until(lambda: stage.state() is None, 5.0)
+    assert_link_closed(stage)
+    with pytest.raises(DeviceError, match='cannot stop the stage: KDC101 port .* is not open'):
+        stage.stop()
+
+
+def test_port_vanishing_before_a_command(make_emulator, make_stage):
+    emu = make_emulator(position_mm=10.0, homed=True)
+    stage = make_stage(emu.port)
+    emu.vanish()
+    with pytest.raises(DeviceError, match=r'KDC101 port .* (vanished|failed while sending)'):
+        stage.move_to(11 * MM, 1 * MM)
+    assert_link_closed(stage)
+
+
+def test_missing_port(make_stage):
+    stage = make_stage('/dev/no-such-kdc101', open_=False)
+    with pytest.raises(DeviceError, match='cannot open KDC101 port /dev/no-such-kdc101'):
+        stage.open()
+    assert_link_closed(stage)
+
+
+def test_wrong_device_model(make_emulator, make_stage):
+    emu = make_emulator(model=b'TDC001')
+    stage = make_stage(emu.port, open_=False)
+    with pytest.raises(DeviceError, match=r"is a 'TDC001', not a KDC101"):
+        stage.open()
+    assert_link_closed(stage)
+
+
+# --- life cycle -----------------------------------------------------------------------------
+
+def test_close_is_idempotent_and_stops_a_moving_stage(make_emulator):
+    emu = make_emulator(position_mm=10.0, homed=True)
+    stage = Kdc101Stage(emu.port)
+    stage.close()                       # never opened
+    with stage:
+        stage.move_at(1 * MM)
+        assert wait_until(lambda: emu.moving, 2.0)
+    assert wait_until(lambda: not emu.moving, 2.0)
+    assert_link_closed(stage)
+    stage.close()
+    with pytest.raises(DeviceError, match='not open'):
+        stage.state()
+
+
+def test_reopen_after_a_failure(make_emulator, make_stage):
+    emu = make_emulator(position_mm=4.0, homed=True)
+    stage = make_stage(emu.port)
+    emu.garble_next()
+    with pytest.raises(DeviceError, match='garbled'):
+        stage.identify()
+    stage.open()
+    assert stage.state().position_m == pytest.approx(4 * MM, abs=1e-7)
