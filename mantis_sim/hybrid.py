@@ -278,7 +278,7 @@ class HybridSimulator:
         phase = self._settle(mode, t, s, phase)
         # An ideal drive starts at full speed: the state at t = 0+ already moves with it.
         s = self._unpack(mode, t, tuple(self._pack(mode, s)))
-        run.energy0_mJ = self.energy(mode, t, s)
+        run.energy0_mJ = self.energy(t, s)
         breakpoints = sorted(b for b in self.model.drive.breakpoints() if 0 < b < self.t_end)
         same_instant, last_t = 0, -1.0
         while t < stop_at:
@@ -343,7 +343,7 @@ class HybridSimulator:
             name = fired[0]
         return name, float(sol.t[-1]), tuple(states[-1])
 
-    def energy(self, mode: Mode, t, s) -> float:
+    def energy(self, t, s) -> float:
         """Mechanical energy: kinetic + potential (+ compliant tendon), mJ."""
         return (self.model.kinetic_energy(s[1], s[2], s[3])
                 + self.model.potential_energy(s[0], s[1], t))

@@ -153,10 +153,9 @@ class Model:
         c1, c3 = m.velocity_terms(w1, w3)
         f1, f3 = q1 - c1, q3 - c3
         tension = 0.0
-        l_free_dot = self.free_length(t)[1]
+        l_free, l_free_dot, l_free_ddot = self.free_length(t)
         if self.rigid and taut:
             tg = self.mech.tendon(th1, th3)
-            l_free, l_free_dot, l_free_ddot = self.free_length(t)
             rate_error = tg.d1 * w1 + tg.d3 * w3 - l_free_dot
             curvature = tg.d11 * w1 * w1 + 2 * tg.d13 * w1 * w3 + tg.d33 * w3 * w3
             k = self.kappa

@@ -69,7 +69,7 @@ def _trajectory(sim: HybridSimulator, raw: RawRun) -> Trajectory:
             rows.append((t, *s[:4], d.tension_N, d.contact_torque_Nmm, seg.phase,
                          mech.tip_speed(s[1], s[2], s[3]), model.spring_energy(s[0]),
                          model.kinetic_energy(s[1], s[2], s[3]), s[4], s[5],
-                         sim.energy(None, t, s), mech.tendon_length(s[0], s[1]),
+                         sim.energy(t, s), mech.tendon_length(s[0], s[1]),
                          model.free_length(t)[0]))
     cols = list(zip(*rows))
     arr = [np.asarray(c, dtype=float) for i, c in enumerate(cols) if i != 7]
