@@ -4,6 +4,7 @@ The tendon's free length between c and d is l_free(t) = l_free(0) - pulled(t).
 """
 from __future__ import annotations
 
+import bisect
 import math
 
 from .scene import Scene
@@ -62,3 +63,40 @@ def make_drive(scene: Scene):
         return RampedPull(speed, scene.drive.acceleration_mm_per_s2 * 1e-6,
                           scene.drive.following_time_constant_ms)
     return ConstantPull(speed)
+
+
+class CommandedPull:
+    """The stage as the simulated rig commands it while running (mantis_sim.world).
+
+    Commands arrive one after the other at the world's current time. A new velocity is
+    reached at a constant acceleration; a stop (velocity 0) is immediate, as the controller's
+    abort. Between knots the acceleration is constant.
+    """
+
+    def __init__(self, accel_mm_per_ms2: float):
+        self.a = accel_mm_per_ms2
+        self.knots = [(0.0, 0.0, 0.0, 0.0)]        # (t ms, pulled mm, v mm/ms, a mm/ms^2)
+
+    def command(self, t: float, velocity_mm_per_ms: float) -> None:
+        x, v, _ = self.pulled(t)
+        self.knots = [k for k in self.knots if k[0] < t]
+        change = velocity_mm_per_ms - v
+        if velocity_mm_per_ms == 0.0 or change == 0.0 or not math.isfinite(self.a):
+            self.knots.append((t, x, velocity_mm_per_ms, 0.0))
+            return
+        accel = math.copysign(self.a, change)
+        ramp = abs(change) / self.a
+        self.knots.append((t, x, v, accel))
+        self.knots.append((t + ramp, x + v * ramp + 0.5 * accel * ramp * ramp,
+                           velocity_mm_per_ms, 0.0))
+
+    def pulled(self, t: float) -> tuple[float, float, float]:
+        if t <= 0.0:
+            return 0.0, 0.0, 0.0
+        i = bisect.bisect_right(self.knots, t, key=lambda k: k[0]) - 1
+        t0, x, v, a = self.knots[i]
+        dt = t - t0
+        return x + v * dt + 0.5 * a * dt * dt, v + a * dt, a
+
+    def breakpoints(self) -> list[float]:
+        return [k[0] for k in self.knots[1:]]

@@ -269,26 +269,41 @@ class HybridSimulator:
         m.l_free0 = length if m.rigid else length - max(tension, 0.0) / m.k_t
         return Mode(latched=latched, taut=True), (th1, th3, 0.0, 0.0, 0.0, 0.0)
 
-    def run(self) -> RawRun:
-        start = time.perf_counter()
+    def start(self) -> None:
+        """Put the rig in its start pose at t = 0; then advance() or run()."""
         mode, s = self.initial_state()
         self.run_data = run = RawRun(self.scene, self.model, segments=[],
                                      phase_start_ms={'I': 0.0})
-        t, phase, after_peak, stop_at = 0.0, 'I', False, self.t_end
-        phase = self._settle(mode, t, s, phase)
+        self.mode, self.t, self.phase, self.after_peak = mode, 0.0, 'I', False
+        self.stop_at = self.t_end
+        self.phase = self._settle(mode, 0.0, s, 'I')
         # An ideal drive starts at full speed: the state at t = 0+ already moves with it.
-        s = self._unpack(mode, t, tuple(self._pack(mode, s)))
-        run.energy0_mJ = self.energy(t, s)
-        breakpoints = sorted(b for b in self.model.drive.breakpoints() if 0 < b < self.t_end)
-        same_instant, last_t = 0, -1.0
-        while t < stop_at:
-            horizon = min([stop_at] + [b for b in breakpoints if b > t + 1e-12])
-            name, t_new, s = self._segment(mode, phase, after_peak, t, s, horizon)
-            same_instant = same_instant + 1 if t_new - last_t < 1e-9 else 0
-            if same_instant > MAX_EVENTS_AT_ONE_INSTANT:
+        self.state = self._unpack(mode, 0.0, tuple(self._pack(mode, s)))
+        run.energy0_mJ = self.energy(0.0, self.state)
+        self._same_instant, self._last_t = 0, -1.0
+
+    def run(self) -> RawRun:
+        """Simulate from the start pose to the peak tip speed (+ post_peak_ms) or t_end."""
+        start = time.perf_counter()
+        self.start()
+        self.advance(self.t_end, stop_after_peak=True)
+        self.run_data.wall_time_s = time.perf_counter() - start
+        return self.run_data
+
+    def advance(self, t_stop: float, stop_after_peak: bool = False) -> None:
+        """Integrate from the current time to t_stop ms, handling every event on the way."""
+        run, mode = self.run_data, self.mode
+        t, s, phase = self.t, self.state, self.phase
+        breakpoints = sorted(b for b in self.model.drive.breakpoints() if t < b < t_stop)
+        while t < min(t_stop, self.stop_at):
+            horizon = min([t_stop, self.stop_at] + [b for b in breakpoints if b > t + 1e-12])
+            name, t_new, s = self._segment(mode, phase, self.after_peak, t, s, horizon)
+            self._same_instant = self._same_instant + 1 if t_new - self._last_t < 1e-9 else 0
+            if self._same_instant > MAX_EVENTS_AT_ONE_INSTANT:
                 raise SimulationError(f'events keep firing at t = {t_new:.9f} ms '
                                       f'(last: {name}); the contact or tendon is chattering')
-            last_t, t = t_new, t_new
+            self._last_t = t = t_new
+            self.t, self.state = t, s
             if name is None or name == 'separate':
                 continue
             run.events.append((name, t, s))
@@ -307,11 +322,11 @@ class HybridSimulator:
             elif name == 'max_contraction':
                 phase = self._advance(phase, 'IV', t)
             elif name == 'peak':
-                run.peak_time_ms, after_peak = t, True
-                stop_at = min(self.t_end, t + self.post_peak)
+                run.peak_time_ms, self.after_peak = t, True
+                if stop_after_peak:
+                    self.stop_at = min(self.t_end, t + self.post_peak)
             phase = self._settle(mode, t, s, phase)
-        run.wall_time_s = time.perf_counter() - start
-        return run
+            self.state, self.phase = s, phase
 
     def _segment(self, mode: Mode, phase, after_peak, t0, s, t1):
         if self._constrained(mode):

@@ -114,6 +114,8 @@ class Drive:
                                           '(effect stage_profile)', 0.0, 1e6, lo_open=True)
     following_time_constant_ms: float = param(0.0, 'ms', 'first-order following error of the '
                                               'stage servo (effect stage_profile)', 0.0, 1000.0)
+    start_position_mm: float = param(10.0, 'mm', 'stage position at the start pose (simulated '
+                                     'rig; the stage travels 0-25 mm)', 0.0, 25.0)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,46 @@
+"""How the simulated backends reach the simulated world (mantis_sim.world.World).
+
+The backends (sim_stage, sim_force, sim_camera) only see a WorldPort. In one process a
+LocalWorldPort wraps a World that a WorldRunner thread advances in simulated time; across
+processes the nodes use mantis_rig.nodes.ros_world_port.RosWorldPort, which speaks to
+sim_world_node over the /sim/* topics (docs/ros_interfaces.md). Times are simulated seconds.
+"""
+from __future__ import annotations
+
+import abc
+
+import numpy as np
+
+from .interfaces import DeviceError
+
+
+class WorldPort(abc.ABC):
+    @abc.abstractmethod
+    def now_s(self) -> float:
+        """The simulated time the world has reached."""
+
+    @abc.abstractmethod
+    def wait_until(self, t_s: float, timeout_s: float) -> None:
+        """Block until the world has reached t_s; DeviceError after timeout_s of wall time."""
+
+    @abc.abstractmethod
+    def set_stage_velocity(self, velocity_m_per_s: float) -> None:
+        """Command the simulated stage; takes effect at the world's current time."""
+
+    @abc.abstractmethod
+    def stage_state(self) -> tuple[float, float]:
+        """(position m, velocity m/s) of the simulated stage now."""
+
+    @abc.abstractmethod
+    def tendon_force(self, t0_s: float, period_s: float, n: int,
+                     timeout_s: float) -> np.ndarray:
+        """True tendon tension N at t0_s + i * period_s (i < n); blocks until simulated."""
+
+    @abc.abstractmethod
+    def marker_frames(self, times_s: np.ndarray, timeout_s: float) -> dict:
+        """True marker positions (name -> (n, 2) m, camera frame) at times_s; blocks until
+        simulated. Times older than the world's history raise DeviceError."""
+
+
+class WorldTimeout(DeviceError):
+    """The simulated world did not reach the asked time in the allowed wall time."""

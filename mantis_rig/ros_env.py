@@ -1,0 +1,52 @@
+"""Keep DDS on this machine: loopback discovery and a ROS domain of this run's own.
+
+Must run before rclpy.init(). `claim_local_domain()` sets ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+(unless the caller set a range) and, when ROS_DOMAIN_ID is unset, picks a domain no other
+mantis process on this machine holds: each claim is an exclusive lock on a file in the temp
+directory, held until the process exits, so parallel test runs and demos never hear each other.
+Child processes inherit the environment and hence the domain.
+"""
+from __future__ import annotations
+
+import fcntl
+import os
+from pathlib import Path
+import tempfile
+
+# Fast DDS maps a domain to UDP ports 7400 + 250 * id; ids up to 101 stay below the ephemeral
+# port range on Linux. Domain 0 is left to whatever else runs on the machine.
+DOMAIN_IDS = range(1, 102)
+_held_locks = []
+
+
+def _lock_dir() -> Path:
+    path = Path(tempfile.gettempdir()) / 'mantis_rig_ros_domains'
+    path.mkdir(exist_ok=True)
+    return path
+
+
+def claim_free_domain() -> int:
+    """Lock and return a ROS domain id that no other process on this machine has claimed."""
+    start = os.getpid() % len(DOMAIN_IDS)
+    ids = list(DOMAIN_IDS)[start:] + list(DOMAIN_IDS)[:start]
+    for domain in ids:
+        handle = open(_lock_dir() / f'domain_{domain}.lock', 'w')
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.close()
+            continue
+        _held_locks.append(handle)
+        return domain
+    raise RuntimeError(f'every ROS domain id in {DOMAIN_IDS.start}..{DOMAIN_IDS.stop - 1} is '
+                       f'claimed by another process on this machine')
+
+
+def claim_local_domain(env: dict | None = None) -> dict:
+    """Make `env` (default os.environ) keep DDS on loopback, on a free domain if none is set."""
+    env = os.environ if env is None else env
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    if not env.get('ROS_DOMAIN_ID'):
+        env['ROS_DOMAIN_ID'] = str(claim_free_domain())
+    env.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
+    return env

@@ -1,0 +1,241 @@
+"""The simulated rig running in simulated time, driven by stage commands (no ROS).
+
+A World starts in the scene's start pose with the stage at rest at drive.start_position_mm. The
+stage's velocity is commanded while the world runs (set_stage_velocity); advance_to() integrates
+the mechanism with mantis_sim's hybrid simulator up to a time, through unlatching, the strike and
+whatever follows. Sensors read the truth back for any time within the kept history: the tendon
+tension and the markers' positions in the camera frame. Sensor imperfections (load-cell
+bandwidth, noise, ADC, pixel quantisation) belong to mantis_sim.sensors, not here.
+
+The mechanism is simulated in full through the release and the strike, and for
+SETTLE_AFTER_PEAK_MS after the peak tip speed. Then it is held in the pose it reached: the
+model has no target for the arm to hit, and its free rebound (resting contact, slack-taut
+chatter of a rigid tendon) is not what anyone measures on the rig. While held, the tendon
+force follows the stage quasi-statically through the tendon's stiffness (tendon.stiffness,
+also for a rigid-tendon scene), never below zero.
+
+Units at this interface are SI (s, m, N); inside, mantis_sim's g, mm, ms.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from .drive import CommandedPull
+from .hybrid import HybridSimulator
+from .model import SimulationError
+from .scene import Scene
+
+# Tension is evaluated exactly at every solver step and at least this often (ms), and linearly
+# interpolated in between: slow phases are near-linear, fast ones have dense solver steps.
+TENSION_GRID_MS = 2.5
+DEFAULT_HISTORY_S = 2.0
+SETTLE_AFTER_PEAK_MS = 20.0
+
+# Where the markers sit: (across, along) mm in the body frame (along = a->b), and in the arm
+# frame (across, along the arm axis from b towards the tip). Like the real rig's five markers.
+BODY_MARKERS_MM = {'mb1': (4.0, 8.0), 'mb2': (-3.0, 14.0), 'mb3': (6.0, 17.0)}
+ARM_MARKERS_MM = {'ma1': (1.0, 7.0), 'ma2': (-1.0, 14.0)}
+# The mechanism's frame (x towards the tendon guide, y up) seen by the camera: image y points
+# down (left-handed, as the tracking software writes), origin at an arbitrary image point.
+CAMERA_ORIGIN_MM = (-4.0, 9.0)
+
+
+class World:
+    def __init__(self, scene: Scene, history_s: float = DEFAULT_HISTORY_S):
+        self.scene = scene
+        self.history_s = history_s
+        self._sim = HybridSimulator(scene, dense=True)
+        self._drive = CommandedPull(scene.drive.acceleration_mm_per_s2 * 1e-6)
+        self._sim.model.drive = self._drive
+        self._sim.start()
+        self._sim.stop_at = math.inf         # the rig runs until told otherwise
+        self._mech = self._sim.model.mech
+        self._tension_cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._start_position_mm = scene.drive.start_position_mm
+        self._held: _HeldPose | None = None
+        self._t_ms = 0.0
+
+    # --- time and the stage ---------------------------------------------------------------
+    @property
+    def time_s(self) -> float:
+        return self._t_ms * 1e-3
+
+    @property
+    def held(self) -> bool:
+        """True once the mechanism is held in its post-strike pose."""
+        return self._held is not None
+
+    def set_stage_velocity(self, velocity_m_per_s: float) -> None:
+        """Command the stage from now on (m/s equals mm/ms, the model's unit)."""
+        self._drive.command(self._t_ms, float(velocity_m_per_s))
+        if self._held is None:
+            self._after_drive_step(self._t_ms)
+
+    def stage_position_m(self) -> float:
+        return (self._start_position_mm + self._drive.pulled(self._t_ms)[0]) * 1e-3
+
+    def stage_velocity_m_per_s(self) -> float:
+        return self._drive.pulled(self._t_ms)[1]
+
+    def advance_to(self, t_s: float) -> None:
+        target = t_s * 1e3
+        if target <= self._t_ms:
+            return
+        if self._held is None:
+            peak = self._sim.run_data.peak_time_ms
+            stop = min(target, peak + SETTLE_AFTER_PEAK_MS) if math.isfinite(peak) else target
+            self._sim.advance(stop)
+            peak = self._sim.run_data.peak_time_ms
+            if math.isfinite(peak) and self._sim.t >= peak + SETTLE_AFTER_PEAK_MS:
+                self._hold()
+            self._forget_before(self._sim.t - self.history_s * 1e3)
+        self._t_ms = target
+
+    # --- the mechanism ---------------------------------------------------------------------
+    @property
+    def phase(self) -> str:
+        return self._sim.phase
+
+    @property
+    def phase_start_s(self) -> dict:
+        return {k: v * 1e-3 for k, v in self._sim.run_data.phase_start_ms.items()}
+
+    @property
+    def events(self) -> list:
+        """(name, t_s) of every event so far: unlatch, overcenter, max_contraction, peak, ..."""
+        return [(name, t * 1e-3) for name, t, _ in self._sim.run_data.events]
+
+    @property
+    def peak_time_s(self) -> float:
+        return self._sim.run_data.peak_time_ms * 1e-3
+
+    def tendon_force_N(self, times_s) -> np.ndarray:
+        """True tendon tension at each time (within the kept history, not past time_s)."""
+        times_ms = self._check_times(times_s)
+        forces = np.empty(times_ms.size)
+        moving = self._simulated(times_ms)
+        if self._held is not None:
+            forces[~moving] = self._held.tension(times_ms[~moving], self._drive)
+        segments = self._sim.run_data.segments
+        index = self._segment_index(times_ms[moving])
+        simulated = np.empty(index.size)
+        for i in np.unique(index):
+            knots_t, knots_f = self._tension_knots(segments[i])
+            mask = index == i
+            simulated[mask] = np.interp(times_ms[moving][mask], knots_t, knots_f)
+        forces[moving] = simulated
+        return forces
+
+    def marker_positions_m(self, times_s) -> dict:
+        """Marker positions (name -> (n, 2) m) in the camera frame at each time."""
+        times_ms = self._check_times(times_s)
+        moving = self._simulated(times_ms)
+        segments = self._sim.run_data.segments
+        index = self._segment_index(times_ms)
+        out = {name: np.empty((times_ms.size, 2)) for name in (*BODY_MARKERS_MM, *ARM_MARKERS_MM)}
+        for k, t in enumerate(times_ms):
+            if moving[k]:
+                seg = segments[index[k]]
+                th1, th3 = seg.dense(min(max(t, seg.t[0]), seg.t[-1]))[:2]
+            else:
+                th1, th3 = self._held.th1, self._held.th3
+            for name, xy in self._markers_mm(th1, th3).items():
+                out[name][k] = xy
+        return {name: xy * 1e-3 for name, xy in out.items()}
+
+    # --- internals -------------------------------------------------------------------------
+    def _simulated(self, times_ms: np.ndarray) -> np.ndarray:
+        """Which times the integrated motion covers (the rest fall in the held pose)."""
+        if self._held is None:
+            return np.ones(times_ms.size, dtype=bool)
+        return times_ms <= self._held.t_ms
+
+    def _segment_index(self, times_ms: np.ndarray) -> np.ndarray:
+        starts = [seg.t[0] for seg in self._sim.run_data.segments]
+        return np.searchsorted(starts, times_ms, side='right') - 1
+
+    def _hold(self) -> None:
+        sim = self._sim
+        seg = sim.run_data.segments[-1]
+        tension = sim.dynamics_at(seg, sim.t, sim.state).tension_N
+        self._held = _HeldPose(sim.t, sim.state[0], sim.state[1], tension,
+                               self._drive.pulled(sim.t)[0], sim.model.k_t)
+
+    def _check_times(self, times_s) -> np.ndarray:
+        times_ms = np.atleast_1d(np.asarray(times_s, dtype=float)) * 1e3
+        if times_ms.size == 0:
+            return times_ms
+        segments = self._sim.run_data.segments
+        earliest = segments[0].t[0] if segments else self._sim.t
+        latest = self._t_ms
+        if times_ms.min() < earliest - 1e-9 or times_ms.max() > latest + 1e-9:
+            raise SimulationError(
+                f'asked for the world at {times_ms.min() * 1e-3:.6f}..'
+                f'{times_ms.max() * 1e-3:.6f} s; it holds {earliest * 1e-3:.6f}..'
+                f'{latest * 1e-3:.6f} s (history {self.history_s} s)')
+        return np.clip(times_ms, earliest, latest)
+
+    def _tension_knots(self, seg) -> tuple[np.ndarray, np.ndarray]:
+        key = id(seg)
+        if key not in self._tension_cache:
+            t0, t1 = seg.t[0], seg.t[-1]
+            grid = np.arange(t0, t1, TENSION_GRID_MS)
+            knots = np.union1d(seg.t, grid)
+            forces = np.array([self._sim.dynamics_at(seg, t, seg.dense(t)).tension_N
+                               for t in knots])
+            self._tension_cache[key] = (knots, forces)
+        return self._tension_cache[key]
+
+    def _markers_mm(self, th1: float, th3: float) -> dict:
+        b = (self._mech.L1 * math.cos(th1), self._mech.L1 * math.sin(th1))
+        frames = {'mb': ((0.0, 0.0), th1), 'ma': (b, th1 + math.pi - th3)}
+        out = {}
+        for name, (across, along) in {**BODY_MARKERS_MM, **ARM_MARKERS_MM}.items():
+            origin, axis = frames[name[:2]]
+            x = origin[0] + along * math.cos(axis) + across * math.sin(axis)
+            y = origin[1] + along * math.sin(axis) - across * math.cos(axis)
+            out[name] = (x + CAMERA_ORIGIN_MM[0], -y + CAMERA_ORIGIN_MM[1])
+        return out
+
+    def _forget_before(self, t_ms: float) -> None:
+        segments = self._sim.run_data.segments
+        keep_from = 0
+        while keep_from < len(segments) - 1 and segments[keep_from].t[-1] < t_ms:
+            self._tension_cache.pop(id(segments[keep_from]), None)
+            keep_from += 1
+        del segments[:keep_from]
+
+    def _after_drive_step(self, t: float) -> None:
+        """A stop changes the tendon's free-length rate at once. A compliant tendon takes it
+        in its stretch; a taut rigid tendon on a free arm needs an impulse, or goes slack if it
+        would have to push."""
+        sim = self._sim
+        mode, s = sim.mode, sim.state
+        if not (sim.model.rigid and mode.taut) or sim._constrained(mode):
+            return
+        tg = self._mech.tendon(s[0], s[1])
+        stretch_rate = tg.d1 * s[2] + tg.d3 * s[3] - sim.model.free_length(t)[1]
+        if stretch_rate < 0.0 and sim.model.unilateral:
+            mode.taut = False
+            return
+        sim.state = sim._retension(mode, t, s)
+
+
+@dataclass(frozen=True)
+class _HeldPose:
+    """The mechanism at rest after the strike; the tendon follows the stage elastically."""
+
+    t_ms: float
+    th1: float
+    th3: float
+    tension_N: float
+    pulled_mm: float
+    stiffness_N_per_mm: float
+
+    def tension(self, times_ms: np.ndarray, drive) -> np.ndarray:
+        pulled = np.array([drive.pulled(t)[0] for t in times_ms])
+        return np.maximum(0.0, self.tension_N
+                          + self.stiffness_N_per_mm * (pulled - self.pulled_mm))
