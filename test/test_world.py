@@ -1,0 +1,105 @@
+"""mantis_sim.world: the simulated rig driven by stage commands in simulated time."""
+import math
+
+import numpy as np
+import pytest
+
+from mantis_sim.model import SimulationError
+from mantis_sim.results import simulate
+from mantis_sim.scene import load_scene
+from mantis_sim.world import SETTLE_AFTER_PEAK_MS, World
+
+STEP_S = 0.01
+
+
+def run_world(scene, until_s, velocity=2.33e-3, command_at_s=0.0):
+    world = World(scene)
+    t = 0.0
+    world.advance_to(command_at_s)
+    world.set_stage_velocity(velocity)
+    t = command_at_s
+    while t < until_s:
+        t = min(until_s, t + STEP_S)
+        world.advance_to(t)
+    return world
+
+
+@pytest.fixture(scope='module')
+def rig_world():
+    return run_world(load_scene('air_23mm_rig'), 2.0)
+
+
+def test_world_reproduces_the_batch_simulation(rig_world):
+    """Same scene, same ramped pull from t = 0: the phases match simulate() to 1 us."""
+    batch = simulate(load_scene('air_23mm_rig')).metrics
+    for phase, start in batch['phase_start_s'].items():
+        assert rig_world.phase_start_s[phase] == pytest.approx(start, abs=1e-6)
+    assert rig_world.peak_time_s == pytest.approx(batch['peak_time_s'], abs=1e-6)
+
+
+def test_tension_matches_the_batch_trajectory(rig_world):
+    result = simulate(load_scene('air_23mm_rig'))
+    traj = result.trajectory
+    t_ms = np.linspace(1000.0, result.metrics['phase_start_s']['II'] * 1e3 - 1.0, 200)
+    expected = np.interp(t_ms, traj.t_ms, traj.tendon_force_N)
+    assert np.allclose(rig_world.tendon_force_N(t_ms * 1e-3), expected, atol=2e-3)
+    strike = (traj.t_ms > result.metrics['phase_start_s']['II'] * 1e3) \
+        & (traj.t_ms < result.metrics['peak_time_s'] * 1e3)
+    peak = rig_world.tendon_force_N(traj.t_ms[strike] * 1e-3).max()
+    assert peak == pytest.approx(traj.tendon_force_N[strike].max(), rel=1e-3)
+
+
+def test_markers_move_as_two_rigid_bodies(rig_world):
+    times = np.linspace(1.5, rig_world.peak_time_s + 0.005, 400)
+    markers = rig_world.marker_positions_m(times)
+    body = [markers[n] for n in ('mb1', 'mb2', 'mb3')]
+    arm = [markers[n] for n in ('ma1', 'ma2')]
+    for group in (body, arm):
+        for i in range(len(group)):
+            for j in range(i + 1, len(group)):
+                d = np.linalg.norm(group[i] - group[j], axis=1)
+                assert np.ptp(d) < 1e-9
+    # the arm swings through a large angle relative to the body in the strike
+    rel = arm[1] - arm[0]
+    ref = body[1] - body[0]
+    angle = np.unwrap(np.arctan2(rel[:, 1], rel[:, 0]) - np.arctan2(ref[:, 1], ref[:, 0]))
+    assert np.ptp(angle) > math.radians(60)
+
+
+def test_mechanism_is_held_after_the_strike_and_tendon_follows_the_stage(rig_world):
+    assert rig_world.held
+    assert rig_world.time_s * 1e3 > rig_world.peak_time_s * 1e3 + SETTLE_AFTER_PEAK_MS
+    late = np.linspace(rig_world.time_s - 0.02, rig_world.time_s, 5)
+    force = rig_world.tendon_force_N(late)
+    slope = np.polyfit(late, force, 1)[0]
+    stiffness = rig_world.scene.tendon.stiffness_N_per_mm
+    assert slope == pytest.approx(stiffness * 2.33, rel=1e-6)    # N/s = N/mm * mm/s
+
+
+def test_times_outside_the_history_are_refused(rig_world):
+    with pytest.raises(SimulationError, match='history'):
+        rig_world.tendon_force_N([rig_world.time_s + 1.0])
+
+
+def test_without_stage_motion_the_rig_stays_in_phase_one():
+    world = run_world(load_scene('air_23mm'), 1.0, velocity=0.0)
+    assert world.phase == 'I'
+    force = world.tendon_force_N(np.linspace(0.1, 1.0, 10))
+    assert np.ptp(force) < 1e-9 and force[0] > 1.0
+
+
+def test_stopping_during_the_strike_keeps_the_simulation_consistent():
+    """A stop on a free arm with a taut rigid tendon: the tendon goes slack (it cannot push),
+    and the world runs on without chattering."""
+    scene = load_scene('air_23mm')
+    world = World(scene)
+    world.set_stage_velocity(2.33e-3)
+    t = 0.0
+    while world.phase_start_s.get('II') is None:
+        t += STEP_S
+        world.advance_to(t)
+    world.set_stage_velocity(0.0)
+    assert world.stage_velocity_m_per_s() == 0.0
+    world.advance_to(t + 0.2)
+    assert world.held
+    assert np.all(np.isfinite(world.tendon_force_N(np.linspace(t, t + 0.2, 100))))
