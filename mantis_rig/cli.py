@@ -8,7 +8,7 @@ from mantis_sim.model import SimulationError
 from mantis_sim.parameters import ParameterError
 from mantis_sim.scene import SceneError
 
-from . import cli_sim
+from . import cli_replay, cli_sim, cli_trial
 
 USAGE_ERROR = 2
 
@@ -17,6 +17,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog='mantis', description=__doc__)
     commands = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
     cli_sim.add_commands(commands)
+    cli_replay.add_commands(commands)
+    cli_trial.add_commands(commands)
     return parser
 
 

@@ -24,8 +24,17 @@ PHASES = ('I', 'II', 'III', 'IV')
 # A re-contact or re-tension is declared only past this overlap (rad or mm), so that the
 # integrator's rounding right after a release cannot be mistaken for a new contact.
 EVENT_OVERLAP = 1e-9
-# A slack rigid tendon counts as separated (no longer grazing) below this stretch, mm.
+# A slack rigid tendon counts as separated (no longer grazing) below this stretch: at least
+# SEPARATION mm, and at least what the integrator resolves of a length, rtol x d_t. Below
+# that, the sign of the stretch is integration noise (LSODA at rtol 1e-6 drifts it by ~1e-6
+# mm within microseconds of a slack event), so only the tension the taut tendon would need
+# decides re-tension; with SEPARATION alone, that noise re-tensioned a tendon that was going
+# slack and the two chattered.
 SEPARATION = 1e-7
+# A slack rigid tendon grazes (rather than separates) if its stretch rate would take less than
+# this to carry it across the separation band: a tension that fell to zero leaves it grazing, a
+# stage stop under a moving arm leaves it separating at the stage's speed.
+GRAZING_TIME_MS = 0.1
 MAX_EVENTS_AT_ONE_INSTANT = 12
 STATE_SCALE = (1.0, 1.0, 1.0, 1.0, 100.0, 100.0)   # rad, rad, rad/ms, rad/ms, mJ, mJ
 
@@ -70,8 +79,10 @@ class HybridSimulator:
         self.t_end = integ.t_end_s * 1e3
         self.post_peak = integ.post_peak_ms
         self.dense = dense
+        self.separation = max(SEPARATION, self.rtol * self.model.mech.d_t)
         self._cache_key = None
         self._cache_value = None
+        self._constrained_memo: dict = {}
 
     # --- mode systems ---------------------------------------------------------------------------
     def _constrained(self, mode: Mode) -> bool:
@@ -83,7 +94,13 @@ class HybridSimulator:
             return self._cache_value
         m = self.model
         if self._constrained(mode):
-            d = m.latched_constrained(t)
+            # Nothing here depends on y: memoise per t, so that every evaluation at one instant
+            # agrees to the bit (Newton's result depends at 1e-14 on where it starts, and an
+            # event root within that of a segment end then had endpoint values of equal
+            # sign for the root finder).
+            d = self._constrained_memo.get(t)
+            if d is None:
+                d = self._constrained_memo[t] = m.latched_constrained(t)
         elif mode.latched:
             d = m.latched_free(t, y[0], y[1], mode.taut)
         else:
@@ -107,28 +124,31 @@ class HybridSimulator:
         return tuple(y)
 
     def _rhs(self, mode: Mode):
+        # float(t), y.tolist(): the model's scalar math runs on Python floats, several times
+        # faster than on the numpy scalars the solver hands over (t, or iterating y).
         dyn = self._dynamics
         if self._constrained(mode):
             def rhs(t, y):
-                d = dyn(mode, t, tuple(y))
+                d = dyn(mode, float(t), y.tolist())
                 return [d.stage_power, d.loss_power]
         elif mode.latched:
             def rhs(t, y):
-                d = dyn(mode, t, tuple(y))
+                d = dyn(mode, float(t), y.tolist())
                 return [d.w1, d.a1, d.stage_power, d.loss_power]
         else:
             def rhs(t, y):
-                d = dyn(mode, t, tuple(y))
+                d = dyn(mode, float(t), y.tolist())
                 return [d.w1, d.w3, d.a1, d.a3, d.stage_power, d.loss_power]
         return rhs
 
-    def _events(self, mode: Mode, phase: str, after_peak: bool, start_stretch: float):
+    def _events(self, mode: Mode, phase: str, after_peak: bool, start_stretch: float,
+                start_rate: float = 0.0):
         m, dyn = self.model, self._dynamics
         events = []
 
         def event(name, direction, fn):
             def g(t, y):
-                return fn(t, tuple(y))
+                return fn(float(t), y.tolist())
             g.terminal, g.direction, g.__name__ = True, direction, name
             events.append(g)
 
@@ -144,13 +164,17 @@ class HybridSimulator:
 
             if m.rigid and mode.taut:
                 event('slack', -1, lambda t, y: dyn(mode, t, y).tension_N)
-            elif m.rigid and not mode.latched and start_stretch > -SEPARATION:
-                # Grazing: the tendon is at zero stretch but would have to push. It is taut
-                # again as soon as the tension it would need turns positive; only once it has
-                # really separated does the stretch itself decide.
+            elif (m.rigid and not mode.latched and start_stretch > -0.5 * self.separation
+                    and start_rate > -self.separation / GRAZING_TIME_MS):
+                # Grazing: the tendon is at zero stretch and stretch rate but would have to
+                # push. It is taut again as soon as the tension it would need turns positive;
+                # only once it has really separated does the stretch itself decide. (Should
+                # the stretch grow past the resolution instead, it is taut as well.)
                 taut = Mode(False, True)
-                event('separate', -1, lambda t, y: stretch(t, y) + SEPARATION)
+                separation = self.separation
+                event('separate', -1, lambda t, y: stretch(t, y) + separation)
                 event('retension', 1, lambda t, y: dyn(taut, t, y).tension_N)
+                event('retension', 1, lambda t, y: stretch(t, y) - separation)
             elif m.rigid:
                 threshold = max(start_stretch, 0.0) + EVENT_OVERLAP
                 event('retension', 1, lambda t, y: stretch(t, y) - threshold)
@@ -176,7 +200,7 @@ class HybridSimulator:
         condition already holds. Returns the (possibly changed) phase."""
         m = self.model
         for _ in range(4):
-            d = self._dynamics(mode, t, tuple(self._pack(mode, s)))
+            d = self._state_dynamics(mode, t, s)
             if self._constrained(mode) or (m.rigid and mode.taut and not mode.latched):
                 if m.unilateral and d.tension_N < 0.0:
                     mode.taut = False
@@ -280,6 +304,18 @@ class HybridSimulator:
         # An ideal drive starts at full speed: the state at t = 0+ already moves with it.
         self.state = self._unpack(mode, 0.0, tuple(self._pack(mode, s)))
         run.energy0_mJ = self.energy(0.0, self.state)
+        if self.model.rigid and mode.taut and not mode.latched:
+            # A free arm on a taut rigid tendon: the stage's jump to full speed jerks the
+            # mechanism (an inelastic impulse along grad l_t, its work and loss booked), or,
+            # were the stage to push, leaves the tendon slack.
+            m, th1, th3 = self.model, self.state[0], self.state[1]
+            tg = m.mech.tendon(th1, th3)
+            rate = tg.d1 * self.state[2] + tg.d3 * self.state[3] - m.free_length(0.0)[1]
+            if rate > 0.0:
+                self.state = self._retension(mode, 0.0, self.state)
+            elif rate < 0.0 and m.unilateral:
+                mode.taut = False
+            self.phase = self._settle(mode, 0.0, self.state, self.phase)
         self._same_instant, self._last_t = 0, -1.0
 
     def run(self) -> RawRun:
@@ -332,13 +368,17 @@ class HybridSimulator:
         if self._constrained(mode):
             # l_t(theta1) = l_free has two roots: start Newton from where the body is now
             self.model.theta1_guess = s[0]
-        y0 = self._pack(mode, s)
+            self._constrained_memo.clear()
+        y0 = np.array(self._pack(mode, s), dtype=float)
         scale = STATE_SCALE[4:] if self._constrained(mode) else (
             (1.0, 1.0, 100.0, 100.0) if mode.latched else STATE_SCALE)
         atol = [self.rtol * self.atol_scale * x for x in scale]
         m = self.model
-        start_stretch = m.mech.tendon_length(s[0], s[1]) - m.free_length(t0)[0]
-        events = self._events(mode, phase, after_peak, start_stretch)
+        tg = m.mech.tendon(s[0], s[1])
+        l_free, l_free_dot, _ = m.free_length(t0)
+        start_stretch = tg.length - l_free
+        start_rate = tg.d1 * s[2] + tg.d3 * s[3] - l_free_dot
+        events = self._events(mode, phase, after_peak, start_stretch, start_rate)
         sol = solve_ivp(self._rhs(mode), (t0, t1), y0, method=self.method, rtol=self.rtol,
                         atol=atol, events=events, dense_output=self.dense)
         if sol.status == -1:
@@ -346,7 +386,8 @@ class HybridSimulator:
                                   f'{phase}: {sol.message}')
         self.run_data.solver_steps += len(sol.t) - 1
         frozen = Mode(mode.latched, mode.taut)
-        states = np.array([self._unpack(frozen, ti, yi) for ti, yi in zip(sol.t, sol.y.T)])
+        states = np.array([self._unpack(frozen, ti, yi)
+                           for ti, yi in zip(sol.t.tolist(), sol.y.T.tolist())])
         dense = None
         if self.dense and sol.sol is not None:
             dense = _DenseSegment(self, frozen, sol.sol)
@@ -364,7 +405,17 @@ class HybridSimulator:
                 + self.model.potential_energy(s[0], s[1], t))
 
     def dynamics_at(self, segment: Segment, t, s) -> Dynamics:
-        mode = Mode(segment.latched, segment.taut)
+        return self._state_dynamics(Mode(segment.latched, segment.taut), t, s)
+
+    def _state_dynamics(self, mode: Mode, t, s) -> Dynamics:
+        """Dynamics at a full state s. A latched arm on a taut rigid tendon has its theta1
+        from l_t(theta1) = l_free(t), which has two roots: Newton must start from s's theta1,
+        not from wherever the last constrained segment left it (a re-latch after the strike
+        found the far root, a contact torque of the wrong sign, and unlatched and re-latched
+        every 0.2 us for ever)."""
+        if self._constrained(mode):
+            self.model.theta1_guess = s[0]
+            self._constrained_memo.clear()
         return self._dynamics(mode, t, tuple(self._pack(mode, s)))
 
 

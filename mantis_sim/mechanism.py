@@ -9,14 +9,15 @@ in the integrator's inner loop, where numpy's per-call overhead on 2-vectors wou
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 import math
+from typing import NamedTuple
 
 from .scene import Scene
 
 
-@dataclass(frozen=True)
-class TendonGeometry:
+# Value types of the inner loop are NamedTuples: built several times per right-hand-side
+# evaluation, and a frozen dataclass costs a multiple of a tuple to construct.
+class TendonGeometry(NamedTuple):
     """Tendon length l between c and d, its gradient and Hessian in (theta1, theta3)."""
 
     length: float
@@ -27,8 +28,7 @@ class TendonGeometry:
     d33: float
 
 
-@dataclass(frozen=True)
-class MassMatrix:
+class MassMatrix(NamedTuple):
     """Symmetric M(theta3) and dM/dtheta3 (M depends on theta3 only)."""
 
     m11: float

@@ -12,8 +12,8 @@ Baumgarte correction). Its Jacobian grad l_t = (l_1, l_3) keeps full rank throug
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 import math
+from typing import NamedTuple
 
 from .drive import make_drive
 from .forces import FluidDrag, Gravity, HingeStiffness, JointDamping, TorsionSpring
@@ -28,8 +28,7 @@ class SimulationError(RuntimeError):
     """The model cannot go on (inconsistent start, no convergence); says where and why."""
 
 
-@dataclass(frozen=True)
-class Dynamics:
+class Dynamics(NamedTuple):
     """Everything the model knows at one instant (g, mm, ms, rad; N, N mm, mJ/ms)."""
 
     th1: float
@@ -115,8 +114,7 @@ class Model:
         self.rhs_evals += 1
         th3 = self.contact_angle
         l_free, l_free_dot, l_free_ddot = self.free_length(t)
-        th1 = self.solve_theta1(l_free, th3)
-        tg = self.mech.tendon(th1, th3)
+        th1, tg = self.solve_theta1(l_free, th3)
         w1 = l_free_dot / tg.d1
         a1 = (l_free_ddot - tg.d11 * w1 * w1) / tg.d1
         m = self.mech.mass(th3)
@@ -177,16 +175,18 @@ class Model:
         return Dynamics(th1, th3, w1, w3, a1, a3, tension, 0.0, -tension * l_free_dot, loss)
 
     # --- helpers --------------------------------------------------------------------------------
-    def solve_theta1(self, l_target: float, th3: float) -> float:
-        """theta1 with l_t(theta1, th3) = l_target, by Newton from the last solution."""
+    def solve_theta1(self, l_target: float, th3: float):
+        """(theta1, its TendonGeometry) with l_t(theta1, th3) = l_target, by Newton from the
+        last solution. The geometry of the converged iterate is returned with it, so the
+        caller does not evaluate it once more."""
         th1 = self.theta1_guess
         for _ in range(50):
             tg = self.mech.tendon(th1, th3)
             step = (tg.length - l_target) / tg.d1
-            th1 -= step
             if abs(step) < 1e-14:
                 self.theta1_guess = th1
-                return th1
+                return th1, tg
+            th1 -= step
         raise SimulationError(f'the latched pose cannot reach tendon length {l_target:.6f} mm '
                               f'(Newton on theta1 did not converge near {th1:.6f} rad)')
 

@@ -1,9 +1,12 @@
 #!/usr/bin/env bash
-# Set everything up and run a simulated trial end to end (simulated hardware, no device needed).
+# Set everything up and run a simulated trial end to end (simulated hardware, no device needed):
+# the whole node stack on the simulated rig, logged to a rosbag2/MCAP bag, then analysed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/bootstrap.sh
 . scripts/ros_env.sh
 out="${1:-out/demo}"
 mkdir -p "$out"
-.venv/bin/mantis sim --scene air_23mm --out "$out/air_23mm_trajectory.csv" --plot "$out/air_23mm.png"
+.venv/bin/mantis trial --backend sim --scene air_23mm_rig --out "$out"
+.venv/bin/mantis sim --scene air_23mm_rig --out "$out/air_23mm_rig_trajectory.csv" \
+  --plot "$out/air_23mm_rig_simulated.png"

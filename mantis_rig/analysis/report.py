@@ -33,7 +33,8 @@ class AnalysisParams:
     # θ1 mapping for tracked data (see energy.py): one of the two.
     theta1_start_rad: float | None = 2.4812
     guide_direction_cam_rad: float | None = None
-    # Angle from the b→outermost-arm-marker line to the b→tip line (arm-specific).
+    # Counter-clockwise angle (right-handed frame) from the b→tip line to the
+    # b→outermost-arm-marker line: an arm constant, not visible to the camera.
     arm_axis_offset_rad: float = 0.0
     inertia: InertiaParams = field(default_factory=InertiaParams)
     # Smoothing: relative velocity precision and the widest window.

@@ -1,0 +1,115 @@
+"""Read a trial bag into analysis inputs: MarkerTracks (mm) and the tendon force samples.
+
+The marker frames come from ``/camera/markers`` (marker blocks, metres, camera frame; see
+:mod:`mantis_rig.recording.marker_block`), the force from ``/loadcell/force_block`` (force
+blocks, see :mod:`mantis_rig.recording.force_block`). Both carry times on the trial's clock, so
+the force is used for the tendon's work only where its time span overlaps the frames'.
+
+A damaged bag (cut short, corrupted) is read up to the damage: :attr:`TrialInput.problems`
+says what was wrong and :attr:`TrialInput.truncated` is set; whether the frames before the
+damage suffice is for the analysis to decide.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+import warnings
+
+import numpy as np
+
+from ..recording import BagReader, TruncatedBagWarning
+from ..recording.force_block import force_block_from_msg
+from ..recording.marker_block import concatenate, marker_block_from_msg
+from .tracking import MarkerTracks, TrackFormatError, load_tracks
+
+MARKERS_TOPIC = '/camera/markers'
+FORCE_TOPIC = '/loadcell/force_block'
+_MM_PER_M = 1000.0
+
+
+@dataclass
+class TrialInput:
+    """What the analysis needs from a trial, and how complete it was."""
+
+    tracks: MarkerTracks
+    force_time_s: np.ndarray | None = None
+    force_N: np.ndarray | None = None
+    problems: list = field(default_factory=list)
+    truncated: bool = False
+    conditions: dict = field(default_factory=dict)
+
+
+def is_bag_path(path) -> bool:
+    """A bag directory or an .mcap file (anything else is taken for a tracking file)."""
+    path = Path(path)
+    return path.is_dir() or path.suffix == '.mcap'
+
+
+def load_trial_input(path) -> TrialInput:
+    """A trial bag (directory or .mcap) or a tracking file (.csv, .csv.gz, .xlsx)."""
+    if is_bag_path(path):
+        return read_trial_bag(path)
+    return TrialInput(tracks=load_tracks(path))
+
+
+def _frame_numbers(time_s: np.ndarray) -> np.ndarray:
+    """Frame indices from the times (blocks carry no frame numbers): a gap of k frame periods
+    between two frames counts k, so dropped frames stay dropped."""
+    steps = np.diff(time_s)
+    if steps.size == 0 or not np.median(steps) > 0:
+        return np.arange(len(time_s), dtype=np.int64)
+    counts = np.maximum(1, np.round(steps / np.median(steps))).astype(np.int64)
+    return np.concatenate([[0], np.cumsum(counts)])
+
+
+def read_trial_bag(path) -> TrialInput:
+    """Marker tracks and force samples of the bag at ``path`` (BagError if unreadable).
+
+    TrackFormatError if the bag holds no usable marker frames (the message names why).
+    """
+    reader = BagReader(path, warn=False)
+    marker_blocks, force_blocks = [], []
+    with warnings.catch_warnings():  # damage found while reading lands in reader.problems
+        warnings.simplefilter('ignore', TruncatedBagWarning)
+        for topic, _, _, msg in reader.messages([MARKERS_TOPIC, FORCE_TOPIC]):
+            if topic == MARKERS_TOPIC:
+                marker_blocks.append(marker_block_from_msg(msg))
+            else:
+                force_blocks.append(force_block_from_msg(msg))
+    problems = list(reader.problems)
+    if not marker_blocks:
+        has = MARKERS_TOPIC in reader.topics
+        why = 'no complete message before the damage' if has and problems else \
+            'no messages' if has else 'no such topic'
+        raise TrackFormatError(
+            f'{path}: no marker frames on {MARKERS_TOPIC} ({why}; topics: '
+            f'{sorted(reader.topics)})' + (f'; bag problems: {"; ".join(problems)}'
+                                           if problems else ''))
+    frames = concatenate(marker_blocks)
+    order = np.argsort(frames.time_s, kind='stable')
+    time_s = frames.time_s[order]
+    conditions = reader.metadata('trial_conditions') or {}
+    tracks = MarkerTracks(
+        time_s=time_s, frames=_frame_numbers(time_s),
+        markers_mm={name: xy[order] * _MM_PER_M for name, xy in frames.markers_m.items()},
+        handedness='left',
+        source={'path': str(path), 'format': 'bag', 'topic': MARKERS_TOPIC, **conditions})
+    tracks.validate()
+    force_t, force = _force_samples(force_blocks, time_s)
+    return TrialInput(tracks=tracks, force_time_s=force_t, force_N=force, problems=problems,
+                      truncated=bool(problems),
+                      conditions=dict(conditions))
+
+
+def _force_samples(blocks, frame_time_s):
+    """Concatenated (time s, force N) of the blocks if they overlap the frames, else Nones."""
+    if not blocks:
+        return None, None
+    times = np.concatenate([b.t0_ns / 1e9 + np.arange(len(b.forces_n)) * (b.period_ns / 1e9)
+                            for b in blocks])
+    forces = np.concatenate([b.forces_n for b in blocks])
+    order = np.argsort(times, kind='stable')
+    times, forces = times[order], forces[order]
+    if times[-1] < frame_time_s[0] or times[0] > frame_time_s[-1]:
+        return None, None
+    return times, forces

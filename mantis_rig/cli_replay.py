@@ -1,0 +1,241 @@
+"""`mantis replay`, `mantis import-tracking`, `mantis analyze`, `mantis recover`."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+import sys
+import threading
+
+USAGE_ERROR = 2
+#: The strike counts as recorded once the tip speed has fallen below this share of its peak.
+STRIKE_END_SHARE = 0.5
+
+
+def _err(command, text):
+    print(f'mantis {command}: {text}', file=sys.stderr)
+
+
+# ---------------------------------------------------------------------------------- replay
+def run_replay(args) -> int:
+    import rclpy
+
+    from .replay import BagPlayer, ReplayError
+    from .replay.schedule import raise_priority
+    from .ros_env import claim_local_domain
+
+    claim_local_domain()
+    if args.realtime:
+        # Before rclpy.init: the DDS threads started there inherit the class, so a publish
+        # does not wait on a lock held by a preempted ordinary-priority DDS thread.
+        try:
+            raise_priority()
+        except OSError as exc:
+            _err('replay', f'warning: real-time scheduling refused ({exc}); playing at normal '
+                           'priority')
+    rclpy.init(args=None)
+    node = rclpy.create_node('mantis_replay')
+    stop = threading.Event()
+    try:
+        try:
+            player = BagPlayer(node, args.bag, rate=args.rate, loop=args.loop,
+                               topics=args.topics, clock_hz=args.clock,
+                               realtime=args.realtime)
+        except ReplayError as exc:
+            _err('replay', exc)
+            return 1
+        for problem in player.report.problems:
+            _err('replay', f'warning: {problem}; replaying the messages before the damage')
+        if args.wait_for_subscribers > 0 and not player.wait_for_subscribers(
+                args.wait_for_subscribers):
+            _err('replay', f'warning: not every topic had a subscriber after '
+                           f'{args.wait_for_subscribers} s; playing anyway')
+        try:
+            report = player.run(stop)
+        except KeyboardInterrupt:
+            stop.set()
+            report = player.report
+            report.interrupted = True
+        player.wait_for_delivery(timeout_s=2.0)
+        print(report)
+        return 0
+    finally:
+        node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+# ------------------------------------------------------------------------- import-tracking
+def run_import(args) -> int:
+    from .analysis import TrackFormatError, analyze_tracks, load_tracks
+    from .analysis.tracking_import import write_tracking_bag
+
+    try:
+        tracks = load_tracks(args.file)
+    except TrackFormatError as exc:
+        _err('import-tracking', exc)
+        return USAGE_ERROR
+    except OSError as exc:
+        _err('import-tracking', f'{args.file}: {exc}')
+        return USAGE_ERROR
+    analysis = None
+    if not args.no_angles:
+        try:
+            analysis = analyze_tracks(tracks)
+        except (ValueError, IndexError) as exc:
+            _err('import-tracking', f'warning: θ1/θ3 not derived ({exc}); writing the '
+                                    'marker frames only')
+    try:
+        report = write_tracking_bag(tracks, args.out, analysis)
+    except (FileExistsError, OSError) as exc:
+        _err('import-tracking', exc)
+        return 1
+    print(report)
+    return 0
+
+
+# --------------------------------------------------------------------------------- analyze
+def _json_safe(value):
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    return value
+
+
+def strike_recorded(analysis) -> bool:
+    """True if the tip speed falls below STRIKE_END_SHARE of its peak after the peak."""
+    i = analysis.phases.index_peak
+    tip = analysis.tip_speed_mps
+    return bool(i < len(tip) - 1 and tip[i + 1:].min() < STRIKE_END_SHARE * tip[i])
+
+
+def analysis_report(analysis, trial, path) -> dict:
+    """summary() plus what the input was and the tendon's work (if force was recorded)."""
+    report = analysis.summary()
+    report['arm_ke_share_at_peak'] = analysis.arm_ke_share_at_peak
+    if analysis.tendon_work_mJ is not None:
+        report['tendon_work_to_IV_mJ'] = float(
+            analysis.tendon_work_mJ[analysis.phases.index_max_contraction])
+    report['input'] = {'path': str(path), 'frames': trial.tracks.n_frames,
+                       'last_frame_s': float(trial.tracks.time_s[-1]),
+                       'truncated': trial.truncated, 'problems': list(trial.problems)}
+    return report
+
+
+def _print_text(report):
+    phases = report['phase_start_s']
+    pivot = report['body_pivot_mm']
+    lines = [
+        f'input            {report["input"]["path"]} ({report["input"]["frames"]} frames)',
+        f'peak tip speed   {report["peak_tip_speed_mps"]:.2f} m/s',
+        'phase starts     ' + ', '.join(f'{k} {v:.4f} s' for k, v in phases.items()),
+        f'overcentering    {report["overcentering_s"]:.4f} s',
+        f'peak body speed  {report["peak_body_speed_radps"]:.1f} rad/s',
+        f'peak arm speed   {report["peak_arm_speed_radps"]:.1f} rad/s (relative to the body)',
+        f'max spring energy {report["max_spring_energy_mJ"]:.1f} mJ',
+        f'arm share of KE at peak {report["arm_ke_share_at_peak"]:.2f}',
+        f'contact angle    {report["contact_angle_deg"]:.2f} deg',
+        f'body pivot       ({pivot[0]:.3f}, {pivot[1]:.3f}) mm (camera frame)',
+        f'L1               {report["L1_mm"]:.2f} mm',
+    ]
+    if 'tendon_work_to_IV_mJ' in report:
+        lines.append(f'tendon work to IV {report["tendon_work_to_IV_mJ"]:.1f} mJ')
+    print('\n'.join(lines))
+
+
+def run_analyze(args) -> int:
+    from .analysis import AnalysisParams, TrackFormatError, analyze_tracks
+    from .analysis.bag_input import is_bag_path, load_trial_input
+    from .recording import BagError
+
+    bag = is_bag_path(args.path)
+    try:
+        trial = load_trial_input(args.path)
+    except (BagError, TrackFormatError, OSError) as exc:
+        _err('analyze', exc)
+        return 1 if bag else USAGE_ERROR
+    last = float(trial.tracks.time_s[-1])
+    if trial.problems:
+        _err('analyze', f'warning: {args.path} is damaged: {"; ".join(trial.problems)}')
+        _err('analyze', f'warning: analysing the {trial.tracks.n_frames} frames recorded '
+                        f'before the damage (up to t = {last:.4f} s)')
+    params = AnalysisParams()
+    if trial.force_N is not None:
+        params.tendon_force_N, params.tendon_force_time_s = trial.force_N, trial.force_time_s
+    try:
+        analysis = analyze_tracks(trial.tracks, params)
+    except (ValueError, IndexError) as exc:
+        cut = f' (the data end at t = {last:.4f} s)' if trial.truncated else ''
+        _err('analyze', f'{args.path}: analysis failed{cut}: {exc}')
+        return 1
+    if not strike_recorded(analysis):
+        why = (f'the data end at t = {last:.4f} s, before the strike is over (the tip speed '
+               f'never falls below {STRIKE_END_SHARE:.0%} of its peak after it)')
+        if trial.truncated:
+            _err('analyze', f'{args.path}: not enough data before the damage: {why}')
+            return 1
+        _err('analyze', f'warning: {why}; phase times and peaks are not reliable')
+    report = analysis_report(analysis, trial, args.path)
+    if args.plot:
+        from .analysis.plots import plot_trial
+        plot_trial(analysis, args.plot, title=Path(args.path).name)
+    if args.json:
+        print(json.dumps(_json_safe(report), indent=2))
+    else:
+        _print_text(report)
+    return 0
+
+
+# --------------------------------------------------------------------------------- recover
+def run_recover(args) -> int:
+    from .recording import main_recover
+
+    return main_recover([args.bag] + (['-o', args.output] if args.output else []))
+
+
+# ---------------------------------------------------------------------------------- parser
+def add_commands(commands) -> None:
+    replay = commands.add_parser(
+        'replay', help='republish a trial bag with its original timing',
+        description='Republish a recorded trial (loopback DDS, own domain unless '
+                    'ROS_DOMAIN_ID is set) with its original relative timing.')
+    replay.add_argument('bag', help='bag directory or .mcap file')
+    replay.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1)')
+    replay.add_argument('--loop', action='store_true', help='start again at the end')
+    replay.add_argument('--topics', nargs='+', metavar='TOPIC', help='only these topics')
+    replay.add_argument('--clock', type=float, nargs='?', const=100.0, default=None,
+                        metavar='HZ', help='publish /clock from the log times (default 100 Hz)')
+    replay.add_argument('--wait-for-subscribers', type=float, default=0.0, metavar='SECONDS',
+                        help='wait up to this long for a subscriber on every topic')
+    replay.add_argument('--realtime', action='store_true',
+                        help='play from a SCHED_FIFO thread (needs root or CAP_SYS_NICE): '
+                             'keeps timing within ~1 ms on a busy machine')
+    replay.set_defaults(run=run_replay)
+
+    imp = commands.add_parser(
+        'import-tracking', help='tracked video (CSV / .xlsx) -> trial bag',
+        description='Write marker tracks (CSV like ../shared/data, or the tracking '
+                    'software\'s .xlsx export) and the derived θ1(t), θ3(t) into a bag.')
+    imp.add_argument('file', help='.csv, .csv.gz or .xlsx')
+    imp.add_argument('--out', required=True, help='new bag directory')
+    imp.add_argument('--no-angles', action='store_true',
+                     help='write only the marker frames (no /analysis/joint_angles)')
+    imp.set_defaults(run=run_import)
+
+    ana = commands.add_parser(
+        'analyze', help='phases, speeds and energies of a trial',
+        description='Analyse a trial bag (directory or .mcap) or a tracking file.')
+    ana.add_argument('path', metavar='BAG_OR_TRACKING_FILE')
+    ana.add_argument('--json', action='store_true', help='print the summary as JSON')
+    ana.add_argument('--plot', metavar='FILE.png', help='write the trial figure')
+    ana.set_defaults(run=run_analyze)
+
+    rec = commands.add_parser(
+        'recover', help='rewrite a crashed/truncated bag into a valid one',
+        description='Rewrite a crashed/truncated trial bag into a valid rosbag2 MCAP bag.')
+    rec.add_argument('bag', help='bag directory (or its .mcap file)')
+    rec.add_argument('-o', '--output', help='new bag directory (default: <bag>_recovered)')
+    rec.set_defaults(run=run_recover)

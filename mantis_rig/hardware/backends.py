@@ -1,0 +1,78 @@
+"""Build a device for a backend name: 'hardware' (KDC101, NI-DAQmx) or 'sim' (the simulated world).
+
+The simulated devices need a WorldPort (`port`: a LocalWorldPort in one process, a RosWorldPort
+across processes) and, for the sensors, the scene (a mantis_sim Scene or a scene name). The
+hardware drivers are imported only when asked for, so the simulated rig runs without pyserial
+or nidaqmx; the simulated ones (scipy: ~2 s) at import, so that a node pays for them when it
+starts rather than inside its configure transition. Devices come back unopened.
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+from mantis_sim.scene import Scene, load_scene
+
+from .interfaces import (
+    CameraTrigger,
+    ConfigurationError,
+    DaqConfig,
+    ForceDaq,
+    Stage,
+    StageLimits,
+)
+from .sim_camera import SimCameraTrigger
+from .sim_force import SimForceDaq
+from .sim_stage import SimStage
+from .world_port import WorldPort
+
+BACKENDS = ('sim', 'hardware')
+DEFAULT_SERIAL_PORT = '/dev/ttyUSB0'
+DEFAULT_TRIGGER_OUTPUT = 'Dev1/port0/line0'
+
+
+def check_backend(backend: str) -> str:
+    if backend not in BACKENDS:
+        raise ConfigurationError(f'unknown backend {backend!r}; valid backends: '
+                                 f'{", ".join(BACKENDS)}')
+    return backend
+
+
+def make_stage(backend: str, port: Optional[WorldPort] = None, *,
+               serial_port: str = DEFAULT_SERIAL_PORT, counts_per_mm: Optional[float] = None,
+               limits: Optional[StageLimits] = None) -> Stage:
+    if check_backend(backend) == 'sim':
+        return SimStage(_world(port, 'stage'), limits)
+    from .kdc101 import Z8_COUNTS_PER_MM, Kdc101Stage
+    return Kdc101Stage(serial_port, counts_per_mm or Z8_COUNTS_PER_MM, limits=limits)
+
+
+def make_force_daq(backend: str, port: Optional[WorldPort] = None, *, scene=None,
+                   overrides=(), seed: int = 0,
+                   config: Optional[DaqConfig] = None) -> ForceDaq:
+    if check_backend(backend) == 'sim':
+        return SimForceDaq(_world(port, 'load cell'), _scene(scene, overrides), seed, config)
+    from .nidaq_force import NidaqForceDaq
+    return NidaqForceDaq(config)
+
+
+def make_camera_trigger(backend: str, port: Optional[WorldPort] = None, *, scene=None,
+                        overrides=(), output: str = DEFAULT_TRIGGER_OUTPUT) -> CameraTrigger:
+    if check_backend(backend) == 'sim':
+        return SimCameraTrigger(_world(port, 'camera'), _scene(scene, overrides))
+    from .nidaq_trigger import NidaqCameraTrigger
+    return NidaqCameraTrigger(output)
+
+
+def _world(port: Optional[WorldPort], device: str) -> WorldPort:
+    if port is None:
+        raise ConfigurationError(f'the simulated {device} needs a WorldPort to the simulated '
+                                 f'world (LocalWorldPort or RosWorldPort)')
+    return port
+
+
+def _scene(scene, overrides):
+    if isinstance(scene, Scene):
+        return scene.with_overrides(list(overrides)) if overrides else scene
+    if not scene:
+        raise ConfigurationError('the simulated sensors need a scene (name or Scene)')
+    return load_scene(scene, list(overrides))

@@ -1,0 +1,251 @@
+"""Bring the rig's node stack up: in one process, or one process per node.
+
+``Stack(StackConfig(...)).start()``:
+
+* ``processes='single'``: sim_world_node (sim backend only), stage_node, loadcell_node,
+  camera_node and supervisor_node constructed here. The simulated devices read the world
+  through a LocalWorldPort on sim_world_node's runner instead of the /sim/* topics. Two
+  executors spin in background threads: a MultiThreadedExecutor for the device nodes (their
+  services block) and a SingleThreadedExecutor for the world, the supervisor and any node added
+  with add_node() (a client), whose callbacks never block (mantis_rig.nodes.executors).
+* ``processes='multi'``: each node is ``python -m mantis_rig.nodes.<name> --ros-args
+  --params-file <stack.yaml>``, with ``use_sim_time`` in sim mode, talking to the world over
+  /sim/*; they inherit this process's environment, hence its ROS domain. stop() interrupts them
+  (SIGINT: the supervisor first, so that it aborts a trial and closes its log; then SIGKILL).
+
+The device nodes come up unconfigured; the supervisor configures and activates them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import importlib
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+
+from rclpy.parameter import Parameter
+import yaml
+
+from mantis_rig.hardware.local_world import LocalWorldPort
+
+from .executors import light_executor, threaded_executor
+
+DEVICE_CLASSES = {'stage_node': 'StageNode', 'loadcell_node': 'LoadcellNode',
+                  'camera_node': 'CameraNode'}
+WORLD_NODE = ('sim_world_node', 'SimWorldNode')
+SUPERVISOR_NODE = ('supervisor_node', 'SupervisorNode')
+EXECUTOR_THREADS = 8
+
+
+@dataclass
+class StackConfig:
+    backend: str = 'sim'
+    scene: str = 'air_23mm_rig'
+    scene_overrides: list = field(default_factory=list)     # key=value, as `mantis sim --set`
+    seed: int = 0
+    real_time_factor: float = 1.0
+    processes: str = 'single'
+    supervisor: dict = field(default_factory=dict)          # supervisor parameter overrides
+    devices: dict = field(default_factory=dict)             # node name -> parameter overrides
+
+    @property
+    def sim(self) -> bool:
+        return self.backend == 'sim'
+
+    def node_parameters(self) -> dict:
+        """node name -> its parameters, as the params file holds them."""
+        params = {}
+        # `set` is a string array; an empty list has no type (in a params file, or for a node
+        # that reads the parameter unset): [''] means no override to the nodes.
+        overrides = list(self.scene_overrides) or ['']
+        if self.sim:
+            params[WORLD_NODE[0]] = {'scene': self.scene, 'seed': self.seed,
+                                     'set': list(overrides),
+                                     'real_time_factor': float(self.real_time_factor)}
+        for name in DEVICE_CLASSES:
+            params[name] = {'backend': self.backend, 'scene': self.scene, 'seed': self.seed,
+                            'set': list(overrides), **self.devices.get(name, {})}
+            if self.sim:
+                params[name]['use_sim_time'] = True
+        params[SUPERVISOR_NODE[0]] = {'backend': self.backend, 'scene': self.scene,
+                                      **self.supervisor}
+        if self.sim:
+            params[SUPERVISOR_NODE[0]]['use_sim_time'] = True
+        return params
+
+    def node_names(self) -> list:
+        return list(self.node_parameters())
+
+
+class StackError(RuntimeError):
+    """A node of the stack could not be started or has died."""
+
+
+def _node_class(name: str, class_name: str):
+    return getattr(importlib.import_module(f'mantis_rig.nodes.{name}'), class_name)
+
+
+def _overrides(values: dict) -> list:
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+class Stack:
+    def __init__(self, config: StackConfig, log_dir: Path | None = None):
+        self.config = config
+        self.log_dir = log_dir
+        self.nodes = []
+        self.processes: dict[str, subprocess.Popen] = {}
+        # the supervisor, the world and clients: callbacks that never block
+        self.executor = light_executor()
+        # the device nodes: blocking services, backends waiting for the world
+        self.device_executor = threaded_executor(EXECUTOR_THREADS)
+        self._threads: list[threading.Thread] = []
+        self._params_file: Path | None = None
+
+    # ------------------------------------------------------------------ start
+    def start(self) -> Stack:
+        if self.config.processes == 'multi':
+            self._start_processes()
+        else:
+            self._start_nodes()
+        for name, executor in (('stack-executor', self.executor),
+                               ('stack-devices', self.device_executor)):
+            thread = threading.Thread(target=_spin, args=(executor,), name=name, daemon=True)
+            thread.start()
+            self._threads.append(thread)
+        return self
+
+    def add_node(self, node) -> None:
+        """Add a node whose callbacks never block (a client, a test's probe)."""
+        self.executor.add_node(node)
+
+    def _start_nodes(self) -> None:
+        params = self.config.node_parameters()
+        port = None
+        try:
+            if WORLD_NODE[0] in params:
+                world = _node_class(*WORLD_NODE)(
+                    node_name=WORLD_NODE[0], parameter_overrides=_overrides(params[WORLD_NODE[0]]))
+                self._add(world, self.executor)
+                # one process: the simulated devices read the world directly, not over /sim/*
+                port = LocalWorldPort(world.runner)
+            for name, class_name in DEVICE_CLASSES.items():
+                kwargs = {'world_port': port} if port is not None else {}
+                self._add(_node_class(name, class_name)(
+                    node_name=name, parameter_overrides=_overrides(params[name]), **kwargs),
+                    self.device_executor)
+            self._add(_node_class(*SUPERVISOR_NODE)(
+                node_name=SUPERVISOR_NODE[0],
+                parameter_overrides=_overrides(params[SUPERVISOR_NODE[0]])), self.executor)
+        except BaseException:
+            self.stop()
+            raise
+
+    def _add(self, node, executor) -> None:
+        self.nodes.append(node)
+        executor.add_node(node)
+
+    def node(self, name: str):
+        return next(n for n in self.nodes if n.get_name() == name)
+
+    def _start_processes(self) -> None:
+        params = {name: {'ros__parameters': values}
+                  for name, values in self.config.node_parameters().items()}
+        handle, path = tempfile.mkstemp(prefix='mantis_stack_', suffix='.yaml')
+        with os.fdopen(handle, 'w') as f:
+            yaml.safe_dump(params, f)
+        self._params_file = Path(path)
+        for name in params:
+            self.processes[name] = subprocess.Popen(
+                self.command(name), stdout=self._log(name), stderr=subprocess.STDOUT,
+                env=os.environ.copy())
+
+    def command(self, name: str) -> list:
+        return [sys.executable, '-m', f'mantis_rig.nodes.{name}', '--ros-args',
+                '--params-file', str(self._params_file)]
+
+    def _log(self, name: str):
+        if self.log_dir is None:
+            return subprocess.DEVNULL
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        return open(self.log_dir / f'{name}.log', 'wb')
+
+    def check_processes(self) -> None:
+        """Raise StackError naming every node process that has ended, with its last output."""
+        dead = self.dead_processes()
+        if dead:
+            raise StackError('node process(es) ended: ' + '; '.join(
+                f'{name} (exit {code}){self._log_tail(name)}' for name, code in dead.items()))
+
+    def _log_tail(self, name: str) -> str:
+        path = self.log_dir / f'{name}.log' if self.log_dir else None
+        if path is None or not path.exists():
+            return ''
+        lines = path.read_text(errors='replace').strip().splitlines()
+        return f': {lines[-1]}' if lines else ''
+
+    def dead_processes(self) -> dict:
+        """name -> exit code of every node process that has ended."""
+        return {name: p.returncode for name, p in self.processes.items()
+                if p.poll() is not None}
+
+    # ------------------------------------------------------------------ stop
+    def stop(self) -> None:
+        for node in self.nodes:
+            if node.get_name() == SUPERVISOR_NODE[0]:
+                node.shutdown_trial()
+        supervisor = self.processes.get(SUPERVISOR_NODE[0])
+        if supervisor is not None:            # first: it aborts a trial and closes its log
+            _interrupt([supervisor])
+        _interrupt(self.processes.values())
+        for executor in (self.executor, self.device_executor):
+            executor.shutdown(timeout_sec=5.0)
+        for node in reversed(self.nodes):
+            _release(node)
+            node.destroy_node()
+        self.nodes = []
+        for thread in self._threads:
+            thread.join(timeout=5.0)
+        if self._params_file is not None:
+            self._params_file.unlink(missing_ok=True)
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc):
+        self.stop()
+
+
+def _spin(executor) -> None:
+    try:
+        executor.spin()
+    except Exception:          # shut down under our feet
+        pass
+
+
+def _interrupt(processes) -> None:
+    processes = list(processes)
+    for process in processes:
+        if process.poll() is None:
+            process.send_signal(signal.SIGINT)
+    for process in processes:
+        try:
+            process.wait(timeout=10.0)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+def _release(node) -> None:
+    """Take a lifecycle node to finalized so that it releases its device."""
+    shutdown = getattr(node, 'trigger_shutdown', None)
+    if shutdown is None:
+        return
+    try:
+        shutdown()
+    except Exception:           # already finalized, or in a state with no shutdown
+        pass

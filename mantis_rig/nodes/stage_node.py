@@ -1,0 +1,226 @@
+"""stage_node: the translation stage as a managed node (docs/ros_interfaces.md).
+
+Active: /stage/joint_state at `joint_state_rate_hz` (node clock: sim time in simulation;
+effort [0.0]: not measured, but never empty, which the rosbags reader needs),
+/stage/velocity_command and /stage/position_command move the stage (a position move runs in a
+worker thread; any new command or /stage/stop ends it), /stage/home blocks until homed.
+/stage/stop works whenever the device is open. A command the driver's safety envelope refuses
+(speed ceiling, travel limits) is refused with a warning; a device error is a fault.
+/diagnostics carries the stage's position, velocity and `homed` ('true'/'false') whenever the
+stage is open.
+"""
+from __future__ import annotations
+
+import math
+import threading
+
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+from std_srvs.srv import Trigger
+
+from mantis_rig.hardware import backends
+from mantis_rig.hardware.apt_units import Z8_COUNTS_PER_MM
+from mantis_rig.hardware.interfaces import ConfigurationError, DeviceError, StageLimits
+from mantis_rig.nodes.device_node import OK, WARN, DeviceNode, Param, run_node
+
+HOME_TIMEOUT_S = 120.0
+MOVE_TIMEOUT_S = 120.0
+
+
+class StageNode(DeviceNode):
+    DEVICE = 'stage'
+    PARAMETERS = (
+        Param('serial_port', backends.DEFAULT_SERIAL_PORT, 'hardware: KDC101 serial port'),
+        Param('counts_per_mm', Z8_COUNTS_PER_MM, 'hardware: encoder counts per mm (Z8: '
+              '34554.96 per the APT protocol, 34304 per the stage data sheet)', (1e3, 1e6)),
+        Param('move_speed_m_per_s', 1.0e-3, 'speed of /stage/position_command moves, m/s',
+              (1e-6, StageLimits().max_speed_m_per_s), at_configure=False),
+        Param('joint_state_rate_hz', 100.0, '/stage/joint_state rate, Hz (read at activate)',
+              (1.0, 1000.0), at_configure=False),
+    )
+
+    def __init__(self, node_name: str = 'stage_node', **kwargs):
+        super().__init__(node_name, **kwargs)
+        self._state_pub = self.create_publisher(JointState, '/stage/joint_state', 10)
+        self.create_subscription(Float64, '/stage/velocity_command', self._on_velocity, 10,
+                                 callback_group=self.services_group)
+        self.create_subscription(Float64, '/stage/position_command', self._on_position, 10,
+                                 callback_group=self.services_group)
+        self.create_service(Trigger, '/stage/home', self._on_home,
+                            callback_group=self.services_group)
+        self.create_service(Trigger, '/stage/stop', self._on_stop,
+                            callback_group=self.services_group)
+        self._timer = None
+        self._move: threading.Thread | None = None
+        self._move_lock = threading.Lock()
+        self._last_state = None
+        self._refused: str | None = None
+        self._stopping = False          # a move ending now was stopped on purpose
+
+    # --- lifecycle hooks --------------------------------------------------------------------
+    def open_device(self, port):
+        stage = backends.make_stage(self.backend_name, port,
+                                    serial_port=self.param('serial_port'),
+                                    counts_per_mm=self.param('counts_per_mm'))
+        stage.open()
+        try:
+            info = stage.identify()
+            self.get_logger().info(f'stage {info.model} #{info.serial_number} ({info.firmware})')
+        except Exception:
+            stage.close()
+            raise
+        return stage
+
+    def start_streaming(self) -> None:
+        self._refused = None
+        self._publish_state()
+        self._timer = self.create_timer(1.0 / self.param('joint_state_rate_hz'),
+                                        self._publish_state)
+
+    def stop_streaming(self) -> None:
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
+            self._timer = None
+        self._stop_motion()
+
+    def diagnostic_values(self) -> dict:
+        values = {}
+        stage = self.device
+        if stage is not None and not self.is_active:
+            try:
+                self._last_state = stage.state()
+            except DeviceError as exc:
+                values['state_error'] = str(exc)
+        state = self._last_state if stage is not None else None
+        if state is not None:
+            values.update(position_m=f'{state.position_m:.7f}',
+                          velocity_m_per_s=f'{state.velocity_m_per_s:.7f}',
+                          homed=_flag(state.homed), forward_limit=_flag(state.forward_limit),
+                          reverse_limit=_flag(state.reverse_limit))
+        if self._refused:
+            values['last_refused_command'] = self._refused
+        return values
+
+    # --- streaming --------------------------------------------------------------------------
+    def _publish_state(self) -> None:
+        stage = self.device
+        if stage is None or not self.is_active:
+            return
+        try:
+            state = stage.state()
+        except DeviceError as exc:
+            self.fault(f'reading the stage state: {exc}')
+            return
+        self._last_state = state
+        msg = JointState(name=['stage'], position=[state.position_m],
+                         velocity=[state.velocity_m_per_s], effort=[0.0])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self._state_pub.publish(msg)
+        if state.fault:
+            self.fault(f'stage reports a fault: {state.fault}')
+
+    # --- commands ---------------------------------------------------------------------------
+    def _on_velocity(self, msg: Float64) -> None:
+        if not self._accepting('velocity command', msg.data):
+            return
+        self._stop_motion(stop_stage=False)
+        self._command(lambda: self.device.move_at(msg.data),
+                      f'velocity {msg.data * 1e3:.4f} mm/s')
+
+    def _on_position(self, msg: Float64) -> None:
+        if not self._accepting('position command', msg.data):
+            return
+        self._stop_motion()
+        target, speed = msg.data, self.param('move_speed_m_per_s')
+        what = f'move to {target * 1e3:.4f} mm'
+        with self._move_lock:
+            self._move = threading.Thread(
+                target=self._command,
+                args=(lambda: self.device.move_to(target, speed, MOVE_TIMEOUT_S), what),
+                name='stage-move', daemon=True)
+            self._move.start()
+
+    def _on_home(self, request, response):
+        if not self.is_active:
+            response.success, response.message = False, self._inactive_reason('home')
+            return response
+        self._stop_motion()
+        try:
+            self.device.home(HOME_TIMEOUT_S)
+        except DeviceError as exc:
+            self.fault(f'homing: {exc}')
+            response.success, response.message = False, f'homing failed: {exc}'
+            return response
+        response.success, response.message = True, 'homed'
+        return response
+
+    def _on_stop(self, request, response):
+        stage = self.device
+        if stage is None:
+            response.success = False
+            response.message = f'no stage is open (node {self.state_label}): nothing to stop'
+            return response
+        self._stop_motion()
+        response.success, response.message = True, 'stopped'
+        return response
+
+    def _accepting(self, what: str, value: float) -> bool:
+        if not self.is_active:
+            self.get_logger().warning(self._inactive_reason(what))
+            return False
+        if not math.isfinite(value):
+            self._refuse(f'{what} {value} is not a finite number')
+            return False
+        return True
+
+    def _command(self, action, what: str) -> None:
+        stage = self.device
+        try:
+            action()
+            if self._refused is not None:
+                self._refused = None
+                self.report(OK, f'active ({self.backend_name})')
+        except ConfigurationError as exc:
+            self._refuse(f'{what} refused: {exc}')
+        except DeviceError as exc:
+            if self.device is stage and self.is_active and not self._stopping:
+                self.fault(f'{what}: {exc}')
+            else:
+                self.get_logger().info(f'{what} ended: {exc}')
+
+    def _refuse(self, reason: str) -> None:
+        self._refused = reason
+        self.get_logger().warning(reason)
+        self.report(WARN, reason)
+
+    def _stop_motion(self, stop_stage: bool = True) -> None:
+        """End a position move in progress; stop the stage."""
+        with self._move_lock:
+            move, self._move = self._move, None
+            self._stopping = True
+            try:
+                stage = self.device
+                if stage is not None and (stop_stage or move is not None):
+                    try:
+                        stage.stop()
+                    except Exception as exc:  # noqa: BLE001 - stopping must go on
+                        self.get_logger().error(f'stopping the stage: {exc}')
+                if move is not None and move is not threading.current_thread():
+                    move.join(timeout=5.0)
+            finally:
+                self._stopping = False
+
+    def _inactive_reason(self, what: str) -> str:
+        return f'{what} refused: stage_node is {self.state_label}, not active'
+
+
+def _flag(value: bool) -> str:
+    return 'true' if value else 'false'
+
+
+def main(args=None):
+    run_node(StageNode, args)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,301 @@
+"""supervisor_node: runs a trial on the rig (``ros2 run mantis_rig supervisor_node``).
+
+Services ``/supervisor/start_trial`` and ``/supervisor/abort`` (std_srvs/Trigger); state on
+``/supervisor/state`` (std_msgs/String, transient local) and on ``/diagnostics``. The trial
+conditions and procedure settings are parameters (mantis_rig.nodes.trial_conditions); they are
+fixed while a trial runs. Each trial is logged to its own bag directory under ``out``; the
+start_trial response names it. The sequence itself is mantis_rig.nodes.trial_sequence.
+"""
+from __future__ import annotations
+
+from datetime import datetime
+from pathlib import Path
+import sys
+import threading
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from lifecycle_msgs.msg import State, TransitionEvent
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+import rclpy
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import InvalidParameterValueException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import JointState, TimeReference
+from std_msgs.msg import Float64MultiArray, String
+from std_srvs.srv import Trigger
+
+from mantis_rig.recording import TRIAL_CONDITIONS, BagWriter
+from mantis_rig.recording.force_block import force_block_from_msg
+from mantis_rig.recording.marker_block import marker_block_from_msg
+from mantis_rig.ros_env import claim_local_domain
+
+from .executors import light_executor
+from .recorder import LATCHED, RELIABLE, Recorder
+from .rig_client import RigClient
+from .trial_conditions import PARAMETERS, ConditionError, TrialConditions, check_value
+from .trial_sequence import DEVICE_NODES, TrialSequence
+
+NODE_NAME = 'supervisor_node'
+STATUS_NAME = 'supervisor_node: trial'
+LOG_TAIL_WAIT_S = 2.0
+
+
+def _descriptor(name, spec) -> ParameterDescriptor:
+    text = f'{spec.description}' + (f' [{spec.unit}]' if spec.unit else '')
+    descriptor = ParameterDescriptor(name=name, description=text)
+    if spec.low is not None:
+        descriptor.floating_point_range = [FloatingPointRange(
+            from_value=float(spec.low), to_value=float(spec.high), step=0.0)]
+    if spec.choices is not None:
+        descriptor.additional_constraints = f'one of: {", ".join(spec.choices)}'
+    return descriptor
+
+
+def bag_directory(out: str) -> Path:
+    """A new directory under ``out`` named after the wall-clock time of the trial's start."""
+    base = Path(out) / datetime.now().strftime('trial_%Y%m%d_%H%M%S')
+    path, n = base, 1
+    while path.exists():
+        n += 1
+        path = base.with_name(f'{base.name}_{n}')
+    return path
+
+
+class SupervisorNode(Node):
+    def __init__(self, node_name: str = NODE_NAME, **kwargs):
+        super().__init__(node_name, **kwargs)
+        self._group = ReentrantCallbackGroup()
+        self._declare_parameters()
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.sequence: TrialSequence | None = None
+        self.bag: BagWriter | None = None
+        self.bag_path: Path | None = None
+        self.trials = 0
+        self.last_abort_reason = ''
+        self._state, self._state_reason = 'idle', ''
+        self._state_lock = threading.Lock()
+        self._final_state_bytes: bytes | None = None
+        self._final_state_logged = threading.Event()
+
+        self._state_pub = self.create_publisher(String, '/supervisor/state', LATCHED)
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', RELIABLE)
+        self.rig = RigClient(self, self._group, self._publish_state)
+        self.recorder = Recorder(self, callback_group=self._group)
+        self.recorder.on_written = self._on_logged
+        group = {'callback_group': self._group}
+        self.create_service(Trigger, '/supervisor/start_trial', self._on_start, **group)
+        self.create_service(Trigger, '/supervisor/abort', self._on_abort, **group)
+        # What the trial watches arrives through the recorder's raw subscriptions (one
+        # callback per message for both jobs), deserialized here before it is logged.
+        self._watched = {
+            '/loadcell/force_block': (Float64MultiArray, self._on_force),
+            '/stage/joint_state': (JointState, self._on_joint_state),
+            '/camera/trigger_time': (TimeReference, self._on_trigger_time),
+            '/camera/markers': (Float64MultiArray, self._on_markers),
+            '/diagnostics': (DiagnosticArray, self._on_diagnostics),
+        }
+        self.recorder.on_message = self._on_recorded
+        for device in DEVICE_NODES:
+            self.create_subscription(
+                TransitionEvent, f'/{device}/transition_event',
+                lambda msg, device=device: self._on_transition(device, msg), 10, **group)
+        self.create_timer(1.0, self._publish_diagnostics,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME), **group)
+        self._publish_state('idle', '')
+
+    # ------------------------------------------------------------------ parameters
+    def _declare_parameters(self) -> None:
+        backend = self.declare_parameter('backend', PARAMETERS['backend'].default,
+                                         _descriptor('backend', PARAMETERS['backend'])).value
+        defaults = {'tare': backend == 'hardware', 'expect_markers': backend == 'sim'}
+        for name, spec in PARAMETERS.items():
+            if name != 'backend':
+                self.declare_parameter(name, defaults.get(name, spec.default),
+                                       _descriptor(name, spec))
+        self.conditions()   # refuse to start with values out of range
+
+    def conditions(self) -> TrialConditions:
+        values = {name: self.get_parameter(name).value for name in PARAMETERS}
+        return TrialConditions.from_mapping(values).validate()
+
+    def _on_set_parameters(self, parameters) -> SetParametersResult:
+        running = self.sequence is not None and self.sequence.running
+        for parameter in parameters:
+            if parameter.name not in PARAMETERS:
+                continue
+            if running:
+                return SetParametersResult(successful=False, reason=(
+                    f'{parameter.name}: a trial is in progress (state {self.sequence.state}); '
+                    f'trial parameters are fixed until it ends'))
+            try:
+                check_value(parameter.name, parameter.value)
+            except ConditionError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    # ------------------------------------------------------------------ services
+    def _on_start(self, request, response):
+        response.success, response.message = self.start_trial()
+        return response
+
+    def _on_abort(self, request, response):
+        response.success, response.message = self.abort('abort requested (/supervisor/abort)')
+        return response
+
+    def start_trial(self) -> tuple[bool, str]:
+        if self.sequence is not None and self.sequence.running:
+            return False, f'a trial is already in progress (state {self.sequence.state})'
+        try:
+            conditions = self.conditions()
+            path = bag_directory(conditions.out)
+            bag = BagWriter(path)
+        except (ConditionError, OSError) as exc:
+            return False, f'cannot start a trial: {exc}'
+        bag.add_metadata(TRIAL_CONDITIONS, conditions.metadata())
+        self.bag, self.bag_path = bag, path
+        self.trials += 1
+        self._final_state_bytes = None
+        self._final_state_logged.clear()
+        sequence = TrialSequence(self.rig, conditions, self._close_log)
+        self.sequence = sequence
+        self.recorder.start(bag)
+        sequence.start()
+        self.get_logger().info(f'trial {self.trials} started; logging to {path}')
+        return True, f'trial started; logging to {path}'
+
+    def abort(self, reason: str) -> tuple[bool, str]:
+        if self.sequence is None:
+            return False, 'no trial in progress (state idle)'
+        ok, message = self.sequence.abort(reason)
+        return ok, message
+
+    def _close_log(self, outcome: dict) -> None:
+        self._final_state_logged.wait(LOG_TAIL_WAIT_S)
+        self.recorder.stop()
+        bag, self.bag = self.bag, None
+        if bag is not None:
+            bag.close(trial_outcome=outcome)
+        if outcome.get('result') == 'aborted':
+            self.last_abort_reason = outcome.get('reason', '')
+        self.get_logger().info(f'trial {self.trials} {outcome.get("result")}: '
+                               f'{outcome.get("reason") or "ok"}; log closed: {self.bag_path}')
+
+    def _on_recorded(self, topic: str, data: bytes) -> None:
+        watched = self._watched.get(topic)
+        if watched is not None:
+            watched[1](deserialize_message(data, watched[0]))
+
+    def _on_logged(self, topic: str, data: bytes) -> None:
+        if topic == '/supervisor/state' and data == self._final_state_bytes:
+            self._final_state_logged.set()
+
+    # ------------------------------------------------------------------ state
+    def _publish_state(self, state: str, reason: str) -> None:
+        with self._state_lock:
+            self._state, self._state_reason = state, reason
+            msg = String(data=state)
+            if state in ('done', 'aborted'):
+                self._final_state_bytes = serialize_message(msg)
+            self._state_pub.publish(msg)
+        self._publish_diagnostics()
+
+    def _publish_diagnostics(self) -> None:
+        state, reason = self._state, self._state_reason
+        level = DiagnosticStatus.WARN if state == 'aborted' else DiagnosticStatus.OK
+        values = {'state': state, 'reason': reason, 'last_abort_reason': self.last_abort_reason,
+                  'trials': str(self.trials), 'bag': str(self.bag_path or '')}
+        status = DiagnosticStatus(
+            level=level, name=STATUS_NAME, hardware_id='mantis_rig',
+            message=state if not reason else f'{state}: {reason}',
+            values=[KeyValue(key=k, value=v) for k, v in values.items()])
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.get_clock().now().to_msg()
+        try:
+            self._diagnostics_pub.publish(array)
+        except Exception:      # shutting down
+            pass
+
+    # ------------------------------------------------------------------ observations
+    def _on_force(self, msg) -> None:
+        if self.sequence is None:
+            return
+        block = force_block_from_msg(msg)
+        self.sequence.on_force_block(block.t0_ns * 1e-9, block.period_ns * 1e-9,
+                                     block.forces_n)
+
+    def _on_joint_state(self, msg) -> None:
+        if msg.position and self.sequence is not None:
+            self.sequence.on_stage_state(msg.position[0],
+                                         msg.velocity[0] if msg.velocity else 0.0)
+
+    def _on_trigger_time(self, msg) -> None:
+        if self.sequence is not None:
+            stamp = msg.header.stamp
+            self.sequence.on_camera_trigger(stamp.sec + stamp.nanosec * 1e-9)
+
+    def _on_markers(self, msg) -> None:
+        frames = marker_block_from_msg(msg)
+        if self.sequence is not None and len(frames):
+            self.sequence.on_markers(float(frames.time_s[0]), float(frames.time_s[-1]),
+                                     len(frames))
+
+    def _on_diagnostics(self, msg) -> None:
+        sequence = self.sequence
+        if sequence is None:
+            return
+        for status in msg.status:
+            device = next((d for d in DEVICE_NODES
+                           if d in status.name or d == status.hardware_id), None)
+            if device is None:
+                continue
+            sequence.on_device_message(device, status.message)
+            homed = next((kv.value for kv in status.values if kv.key == 'homed'), None)
+            if homed is not None:
+                sequence.on_stage_homed(homed.strip().lower() in ('true', '1', 'yes'))
+            if status.level == DiagnosticStatus.ERROR:
+                sequence.on_device_fault(device, status.message or 'diagnostic level ERROR')
+
+    def _on_transition(self, device: str, msg) -> None:
+        if msg.start_state.id == State.PRIMARY_STATE_ACTIVE \
+                and msg.goal_state.id != State.PRIMARY_STATE_ACTIVE \
+                and self.sequence is not None:
+            self.sequence.on_device_fault(device, f'left the active state (now '
+                                                  f'{msg.goal_state.label})')
+
+    def shutdown_trial(self, reason: str = 'supervisor shutting down') -> None:
+        """Abort a running trial and wait (briefly) for its log to close."""
+        sequence = self.sequence
+        if sequence is not None and sequence.running:
+            sequence.abort(reason)
+            sequence.finished.wait(5.0)
+
+
+def main(args=None) -> int:
+    claim_local_domain()
+    rclpy.init(args=args if args is not None else sys.argv)
+    node = None
+    try:
+        try:
+            node = SupervisorNode()
+        except (ConditionError, ValueError, InvalidParameterValueException) as exc:
+            print(f'supervisor_node: {exc}', file=sys.stderr)
+            return 2
+        executor = light_executor()     # no callback of the supervisor blocks
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.shutdown_trial()
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,71 @@
+"""TrialClient: a small node that starts a trial through /supervisor/start_trial and follows
+/supervisor/state until the trial ends (for `mantis trial` and the tests)."""
+from __future__ import annotations
+
+import threading
+import time
+
+from rclpy.node import Node
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+from .recorder import LATCHED
+
+
+class TrialClient(Node):
+    def __init__(self, node_name: str = 'mantis_trial_client', **kwargs):
+        super().__init__(node_name, **kwargs)
+        self.states: list[str] = []
+        self._changed = threading.Condition()
+        self._start = self.create_client(Trigger, '/supervisor/start_trial')
+        self._abort = self.create_client(Trigger, '/supervisor/abort')
+        self.create_subscription(String, '/supervisor/state', self._on_state, LATCHED)
+
+    def _on_state(self, msg) -> None:
+        with self._changed:
+            self.states.append(msg.data)
+            self._changed.notify_all()
+
+    def wait_for_supervisor(self, timeout_s: float = 60.0, alive=lambda: None) -> bool:
+        """Wait for /supervisor/start_trial; ``alive()`` may raise to stop waiting."""
+        deadline = time.monotonic() + timeout_s
+        while not self._start.wait_for_service(timeout_sec=0.5):
+            alive()
+            if time.monotonic() > deadline:
+                return False
+        return True
+
+    def call(self, which: str, timeout_s: float = 30.0) -> tuple[bool, str]:
+        """Call start_trial or abort; (success, message), or (False, why) on timeout."""
+        client = {'start_trial': self._start, 'abort': self._abort}[which]
+        if not client.wait_for_service(timeout_sec=timeout_s):
+            return False, f'{client.srv_name} is not available after {timeout_s} s'
+        future = client.call_async(Trigger.Request())
+        done = threading.Event()
+        future.add_done_callback(lambda _: done.set())
+        if not done.wait(timeout_s):
+            return False, f'{client.srv_name} did not answer within {timeout_s} s'
+        return future.result().success, future.result().message
+
+    def wait_for_state(self, states, after: int = 0, timeout_s: float = 120.0) -> str | None:
+        """The first state in ``states`` heard at or after index ``after`` of self.states."""
+        deadline = time.monotonic() + timeout_s
+        with self._changed:
+            while True:
+                found = next((s for s in self.states[after:] if s in states), None)
+                remaining = deadline - time.monotonic()
+                if found is not None or remaining <= 0:
+                    return found
+                self._changed.wait(remaining)
+
+    def run_trial(self, timeout_s: float = 300.0) -> tuple[bool, str, str | None]:
+        """Start a trial and wait for its end: (started, start message, final state)."""
+        mark = len(self.states)
+        ok, message = self.call('start_trial')
+        if not ok:
+            return False, message, None
+        self.wait_for_state(('configuring',), mark, timeout_s=10.0)
+        with self._changed:
+            begun = next((i for i in range(mark, len(self.states))
+                          if self.states[i] == 'configuring'), mark)
+        return True, message, self.wait_for_state(('done', 'aborted'), begun, timeout_s)

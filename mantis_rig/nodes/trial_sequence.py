@@ -1,0 +1,359 @@
+"""The trial state machine, as plain logic: what the supervisor does, in which order, and when
+it gives up. No ROS here: the supervisor node implements the RigPort (service calls, command
+topics) and feeds what it hears (force blocks, stage state, camera trigger, marker frames,
+device faults) into the TrialSequence's ``on_*`` methods, from any thread.
+
+``run()`` (the supervisor's worker thread) goes through
+configuring -> [homing] -> taking_up_slack -> [taring] -> arming -> pulling -> released ->
+stopping -> returning -> done, and ends in ``aborted`` instead when ``abort(reason)`` is called
+(abort service, force ceiling, travel limit, device fault, timeout, failed call). An abort
+stops the stage at once, from the thread that detected it. On release the force callback stops
+the stage and fires the camera trigger itself, without waiting for the worker.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+import threading
+import time
+from typing import Protocol
+
+from .force_monitor import ForceMonitor
+from .trial_conditions import TrialConditions
+
+STATES = ('idle', 'configuring', 'homing', 'taking_up_slack', 'taring', 'arming', 'pulling',
+          'released', 'stopping', 'returning', 'done', 'aborted')
+FINAL_STATES = ('idle', 'done', 'aborted')
+DEVICE_NODES = ('stage_node', 'loadcell_node', 'camera_node')
+POLL_S = 0.005                   # the worker's control period
+AT_REST_M_PER_S = 1e-6
+SETTLED_S = 0.3                  # a move has ended when the stage rested this long (wall time)
+MOVE_ATTEMPTS = 3
+HOMED_WAIT_S = 3.0               # unknown after this long: go on without homing
+
+
+class TrialAborted(Exception):
+    pass
+
+
+class Pending:
+    """The answer to a request, set later from another thread: (ok, message) or a value."""
+
+    def __init__(self, value=None, done=False):
+        self._event = threading.Event()
+        self._value = value
+        if done:
+            self._event.set()
+
+    def set(self, value) -> None:
+        self._value = value
+        self._event.set()
+
+    def done(self) -> bool:
+        return self._event.is_set()
+
+    def value(self):
+        return self._value
+
+
+class RigPort(Protocol):
+    """What the sequence asks of the rig. Calls return at once; Pending values are
+    (ok: bool, message: str), except get_state's (ok, state label)."""
+
+    def now_s(self) -> float: ...
+    def get_state(self, node: str) -> Pending: ...
+    def change_state(self, node: str, transition: str) -> Pending: ...
+    def call(self, service: str) -> Pending: ...          # std_srvs/Trigger, e.g. 'stage/home'
+    def set_camera(self, frame_rate_hz: float, pre_trigger_s: float,
+                   post_trigger_s: float) -> Pending: ...
+    def move_at(self, velocity_m_per_s: float) -> None: ...
+    def move_to(self, position_m: float) -> None: ...
+    def stop_stage(self) -> None: ...                     # velocity 0 and stage/stop, at once
+    def publish_state(self, state: str, reason: str) -> None: ...
+
+
+class TrialSequence:
+    def __init__(self, rig: RigPort, conditions: TrialConditions,
+                 close_log: Callable[[dict], None] | None = None):
+        self.rig = rig
+        self.conditions = conditions
+        self.close_log = close_log or (lambda outcome: None)
+        self.monitor = ForceMonitor(conditions.force_ceiling_n, conditions.release_jump_n)
+        self.state = 'idle'
+        self.reason = ''
+        self.outcome: dict = {}
+        self.state_times: list[tuple[str, float]] = []
+        self.finished = threading.Event()
+        self._lock = threading.RLock()
+        self._abort = threading.Event()
+        self._released = threading.Event()
+        self._active_devices = False
+        # what the rig reported
+        self.stage_position_m: float | None = None
+        self.stage_velocity_m_per_s: float | None = None
+        self.stage_homed: bool | None = None
+        self.start_position_m: float | None = None
+        self.pull_start_position_m: float | None = None
+        self.return_error_m: float | None = None
+        self._last_motion = time.monotonic()   # wall time the stage was last seen moving
+        self.trigger_time_s: float | None = None
+        self.marker_span_s: tuple[float, float] | None = None
+        self.marker_frames = 0
+        self.device_messages: dict[str, str] = {}
+        self._trigger_call: Pending | None = None
+
+    # ------------------------------------------------------------------ status
+    @property
+    def running(self) -> bool:
+        return self.state not in FINAL_STATES
+
+    def _set_state(self, state: str, reason: str = '') -> None:
+        with self._lock:
+            self.state = state
+            self.state_times.append((state, self.rig.now_s()))
+        self.rig.publish_state(state, reason)
+
+    # ------------------------------------------------------------------ aborting
+    def abort(self, reason: str) -> tuple[bool, str]:
+        """Stop the stage now and end the trial as aborted; refused (False, why) when no trial
+        is in progress or it is already ending."""
+        with self._lock:
+            if not self.running:
+                return False, f'no trial in progress (state {self.state})'
+            if self._abort.is_set():
+                return False, f'the trial is already aborting: {self.reason}'
+            self.reason = reason
+            self._abort.set()
+        self.rig.stop_stage()
+        return True, f'aborting: {reason}'
+
+    def _check(self) -> None:
+        if self._abort.is_set():
+            raise TrialAborted(self.reason)
+
+    def _fail(self, reason: str) -> None:
+        self.abort(reason)
+        raise TrialAborted(self.reason)
+
+    def _wait(self, ready: Callable[[], bool], what: str, timeout_s: float | None = None):
+        deadline = time.monotonic() + (timeout_s or self.conditions.phase_timeout_s)
+        while True:
+            self._check()
+            if ready():
+                return
+            if time.monotonic() > deadline:
+                self._fail(f'timeout: {what} (state {self.state})')
+            time.sleep(POLL_S)
+
+    def _await(self, pending: Pending, what: str):
+        self._wait(pending.done, what)
+        ok, message = pending.value()
+        if not ok:
+            self._fail(f'{what} failed: {message}')
+        return message
+
+    # ------------------------------------------------------------------ observations
+    def on_force_block(self, t0_s: float, period_s: float, forces) -> None:
+        with self._lock:
+            self.monitor.feed(t0_s, period_s, forces)
+            hit = self.monitor.ceiling_hit
+            release = (self.state == 'pulling' and self.monitor.release_t_s is not None
+                       and not self._released.is_set())
+            if release:
+                self._released.set()
+        if hit is not None and self.running:
+            self.abort(f'force ceiling: {hit[1]:.2f} N > {self.conditions.force_ceiling_n} N '
+                       f'at t = {hit[0]:.4f} s')
+        elif release and not self._abort.is_set():
+            self.rig.stop_stage()                        # the tendon stiffens after the strike
+            self._trigger_call = self.rig.call('camera/trigger')
+            self._set_state('released')
+
+    def on_stage_state(self, position_m: float, velocity_m_per_s: float) -> None:
+        previous = self.stage_position_m
+        if abs(velocity_m_per_s) >= AT_REST_M_PER_S or previous is None \
+                or abs(position_m - previous) > 1e-6:
+            self._last_motion = time.monotonic()
+        self.stage_position_m, self.stage_velocity_m_per_s = position_m, velocity_m_per_s
+        start = self.pull_start_position_m
+        if start is not None and self.state in ('taking_up_slack', 'pulling') \
+                and abs(position_m - start) > self.conditions.travel_mm * 1e-3:
+            self.abort(f'travel limit: the stage moved {abs(position_m - start) * 1e3:.3f} mm '
+                       f'> {self.conditions.travel_mm} mm')
+
+    def on_stage_homed(self, homed: bool) -> None:
+        self.stage_homed = homed
+
+    def on_camera_trigger(self, t_s: float) -> None:
+        self.trigger_time_s = t_s
+
+    def on_markers(self, first_s: float, last_s: float, n_frames: int) -> None:
+        with self._lock:
+            span = self.marker_span_s
+            self.marker_span_s = (first_s, last_s) if span is None else \
+                (min(span[0], first_s), max(span[1], last_s))
+            self.marker_frames += n_frames
+
+    def on_device_message(self, node: str, message: str) -> None:
+        self.device_messages[node] = message
+
+    def on_device_fault(self, node: str, reason: str) -> None:
+        if self._active_devices and self.running:
+            self.abort(f'device fault: {node}: {reason}')
+
+    # ------------------------------------------------------------------ the trial
+    def start(self) -> threading.Thread:
+        """Enter 'configuring' now (so an abort is accepted at once) and run() in a thread."""
+        self._set_state('configuring')
+        worker = threading.Thread(target=self.run, name='trial', daemon=True)
+        worker.start()
+        return worker
+
+    def run(self) -> dict:
+        """Run one trial to its end; return the outcome (also given to close_log)."""
+        try:
+            self._bring_up()
+            self._home()
+            self._take_up_slack()
+            if self.conditions.tare:
+                self._set_state('taring')
+                self._await(self.rig.call('loadcell/tare'), 'loadcell tare')
+            self._arm()
+            self._pull()
+            self._stop_and_record()
+            self._return()
+            return self._finish('done', 'completed', '')
+        except TrialAborted:
+            return self._finish('aborted', 'aborted', self.reason)
+        except Exception as exc:        # a bug must still stop the stage and close the log
+            self.abort(f'supervisor error: {type(exc).__name__}: {exc}')
+            return self._finish('aborted', 'aborted', self.reason)
+
+    def _bring_up(self) -> None:
+        if self.state != 'configuring':
+            self._set_state('configuring')
+        for node in DEVICE_NODES:
+            label = self._await(self.rig.get_state(node), f'{node} get_state')
+            steps = {'unconfigured': ('configure', 'activate'), 'inactive': ('activate',),
+                     'active': ()}.get(label)
+            if steps is None:
+                self._fail(f'{node} is {label}, cannot bring it up'
+                           + self._device_hint(node))
+            for transition in steps:
+                pending = self.rig.change_state(node, transition)
+                self._wait(pending.done, f'{node} {transition}')
+                ok, message = pending.value()
+                if not ok:
+                    self._fail(f'{node} {transition} failed: {message}' + self._device_hint(node))
+        self._active_devices = True
+
+    def _device_hint(self, node: str) -> str:
+        message = self.device_messages.get(node)
+        return f' ({node} reports: {message})' if message else ''
+
+    def _home(self) -> None:
+        self._wait(lambda: self.stage_position_m is not None, 'stage state', 10.0)
+        deadline = time.monotonic() + HOMED_WAIT_S     # stage_node's diagnostics say it
+        self._wait(lambda: self.stage_homed is not None or time.monotonic() > deadline,
+                   'stage diagnostics')
+        if self.stage_homed is False:
+            self._set_state('homing')
+            self._await(self.rig.call('stage/home'), 'stage home')
+        if self.conditions.start_position_mm >= 0:
+            error_m = self._move_to(self.conditions.start_position_mm * 1e-3,
+                                    'move to the start position')
+            if abs(error_m) >= self.conditions.position_tolerance_mm * 1e-3:
+                self._fail(f'the stage stopped {error_m * 1e3:+.4f} mm from the start position')
+        self.start_position_m = self.stage_position_m
+
+    def _move_to(self, target_m: float, what: str) -> float:
+        """Move to target_m and let the stage settle; retry a move that ends outside the
+        tolerance (MOVE_ATTEMPTS in all). Return the remaining error, m."""
+        tolerance_m = self.conditions.position_tolerance_mm * 1e-3
+        for _ in range(MOVE_ATTEMPTS):
+            self.rig.move_to(target_m)
+            commanded = time.monotonic()
+            self._wait(lambda since=commanded: self._at_rest() and SETTLED_S
+                       <= time.monotonic() - max(since, self._last_motion), what)
+            error_m = self.stage_position_m - target_m
+            if abs(error_m) < tolerance_m:
+                break
+        return error_m
+
+    def _take_up_slack(self) -> None:
+        self._set_state('taking_up_slack')
+        self._wait(lambda: self.monitor.latest_n is not None, 'the force stream')
+        if self.monitor.latest_n < self.conditions.slack_force_n:
+            self.pull_start_position_m = self.stage_position_m
+            self.rig.move_at(self.conditions.slack_speed_mm_s * 1e-3)
+            self._wait(lambda: self.monitor.latest_n >= self.conditions.slack_force_n,
+                       'taking up slack')
+            self.rig.stop_stage()
+            self._wait(self._at_rest, 'the stage to stop after taking up slack')
+
+    def _at_rest(self) -> bool:
+        return abs(self.stage_velocity_m_per_s) < AT_REST_M_PER_S
+
+    def _arm(self) -> None:
+        self._set_state('arming')
+        c = self.conditions
+        self._await(self.rig.set_camera(c.frame_rate_hz, c.pre_trigger_s, c.post_trigger_s),
+                    'set camera parameters')
+        self._await(self.rig.call('camera/arm'), 'camera arm')
+
+    def _pull(self) -> None:
+        self.pull_start_position_m = self.stage_position_m
+        with self._lock:
+            self.monitor.arm_release()
+            self._set_state('pulling')
+        self.rig.move_at(self.conditions.pull_speed_mm_s * 1e-3)
+        self._wait(self._released.is_set, 'release not detected')
+
+    def _stop_and_record(self) -> None:
+        self._set_state('stopping')
+        self._wait(self._at_rest, 'the stage to stop')
+        self._await(self._trigger_call, 'camera trigger')
+        self._wait(lambda: self.trigger_time_s is not None, 'the camera trigger time')
+        c = self.conditions
+        end = self.trigger_time_s + c.post_trigger_s
+        self._wait(lambda: self.rig.now_s() >= end, 'the camera post-trigger window')
+        if c.expect_markers:
+            tolerance = max(2.0 / c.frame_rate_hz, 0.01)
+            self._wait(lambda: self.marker_span_s is not None
+                       and self.marker_span_s[1] >= end - tolerance, 'the marker frames')
+
+    def _return(self) -> None:
+        self._set_state('returning')
+        self.return_error_m = self._move_to(self.start_position_m, 'return to the start position')
+
+    def _finish(self, state: str, result: str, reason: str) -> dict:
+        if state == 'aborted':
+            self.rig.stop_stage()
+        outcome = self._outcome(result, reason)
+        self._set_state(state, reason)
+        self.outcome = outcome
+        try:
+            self.close_log(outcome)
+        finally:
+            self.finished.set()
+        return outcome
+
+    def _outcome(self, result: str, reason: str) -> dict:
+        m = self.monitor
+        out = {'result': result, 'reason': reason,
+               'force_samples': m.samples, 'force_gaps': len(m.gaps),
+               'force_stream_s': f'{m.duration_s:.6f}',
+               'peak_force_n': f'{m.peak_n:.4f}' if m.samples else '',
+               'peak_force_time_s': f'{m.peak_t_s:.6f}' if m.samples else '',
+               'release_time_s': '' if m.release_t_s is None else f'{m.release_t_s:.6f}',
+               'camera_trigger_time_s': '' if self.trigger_time_s is None
+               else f'{self.trigger_time_s:.6f}',
+               'marker_frames': self.marker_frames,
+               'return_error_mm': '' if self.return_error_m is None
+               else f'{self.return_error_m * 1e3:.4f}',
+               'states': ';'.join(f'{s}@{t:.4f}' for s, t in self.state_times)}
+        if self.marker_span_s is not None:
+            out['marker_span_s'] = f'{self.marker_span_s[0]:.6f},{self.marker_span_s[1]:.6f}'
+            if m.release_t_s is not None:
+                caught = self.marker_span_s[0] <= m.release_t_s <= self.marker_span_s[1]
+                out['release_in_camera_window'] = str(caught).lower()
+        return out

@@ -1,0 +1,261 @@
+"""import-tracking -> bag -> analyze: the bag path gives the same analysis as the tracking file;
+damaged bags are analysed up to the damage; bad spreadsheets name what is missing."""
+import json
+from pathlib import Path
+import shutil
+
+from mcap.reader import make_reader
+import numpy as np
+import pytest
+
+from mantis_rig.analysis import analyze_tracks, load_tracks
+from mantis_rig.analysis.bag_input import read_trial_bag
+from mantis_rig.analysis.tracking_import import ANGLES_TOPIC
+from mantis_rig.cli import main
+from mantis_rig.recording import BagReader, BagWriter
+from mantis_rig.recording.force_block import force_block_to_msg
+from mantis_rig.recording.marker_block import (
+    MarkerFrames,
+    marker_block_from_msg,
+    marker_blocks_to_msgs,
+)
+
+DATA = (Path(__file__).resolve().parents[1] / '..' / 'shared' / 'data'
+        / 'air_23mm_2p3mmps_trial1_markers.csv.gz').resolve()
+N_FRAMES = 65255
+real_trial = pytest.mark.skipif(not DATA.exists(), reason=f'reference trial absent: {DATA}')
+
+
+def run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def analyze_json(capsys, path):
+    code, out, err = run(capsys, 'analyze', path, '--json')
+    return code, (json.loads(out) if code == 0 else None), err
+
+
+@pytest.fixture(scope='module')
+def csv_analysis():
+    return analyze_tracks(load_tracks(DATA))
+
+
+@pytest.fixture(scope='module')
+def imported_bag(tmp_path_factory):
+    out = tmp_path_factory.mktemp('import') / 'trial1'
+    assert main(['import-tracking', str(DATA), '--out', str(out)]) == 0
+    return out
+
+
+def cut_copy(bag, dest, keep_fraction):
+    """A copy of ``bag`` whose .mcap keeps only its first ``keep_fraction`` of bytes, without
+    metadata.yaml: what a crash mid-recording leaves."""
+    shutil.copytree(bag, dest)
+    (dest / 'metadata.yaml').unlink()
+    mcap = next(dest.glob('*.mcap'))
+    with open(mcap, 'r+b') as f:
+        f.truncate(int(mcap.stat().st_size * keep_fraction))
+    return dest
+
+
+# ------------------------------------------------------------------------ the real trial
+@real_trial
+def test_imported_bag_holds_markers_angles_and_source(imported_bag, csv_analysis):
+    tracks = load_tracks(DATA)
+    reader = BagReader(imported_bag)
+    assert reader.complete
+    conditions = reader.metadata('trial_conditions')
+    assert conditions['source_file'] == str(DATA) and conditions['source_format'] == 'csv'
+    assert int(conditions['frames']) == N_FRAMES
+    counts = {t: i.message_count for t, i in reader.topics.items()}
+    assert counts == {'/camera/markers': 66, ANGLES_TOPIC: N_FRAMES}
+    blocks = [marker_block_from_msg(m) for _, _, _, m in reader.messages(['/camera/markers'])]
+    time_s = np.concatenate([b.time_s for b in blocks])
+    np.testing.assert_array_equal(time_s, tracks.time_s)
+    for name, xy_mm in tracks.markers_mm.items():  # metres in the bag
+        xy_m = np.concatenate([b.markers_m[name] for b in blocks])
+        np.testing.assert_allclose(xy_m * 1e3, xy_mm, rtol=0, atol=1e-12)
+    angles = [m for _, _, _, m in reader.messages([ANGLES_TOPIC])]
+    assert angles[0].name == ['theta1', 'theta3']
+    for i in (0, 49_000, N_FRAMES - 1):
+        assert list(angles[i].position) == [csv_analysis.theta1_rad[i],
+                                            csv_analysis.theta3_rad[i]]
+        assert list(angles[i].velocity) == [csv_analysis.omega1_radps[i],
+                                            csv_analysis.omega3_radps[i]]
+        stamp = angles[i].header.stamp
+        assert stamp.sec + stamp.nanosec * 1e-9 == pytest.approx(tracks.time_s[i], abs=1e-9)
+
+
+@real_trial
+def test_analysis_of_bag_equals_analysis_of_tracking_file(imported_bag, csv_analysis, capsys,
+                                                          tmp_path):
+    code, from_bag, err = analyze_json(capsys, imported_bag)
+    assert code == 0 and err == ''
+    code, from_csv, _ = run(capsys, 'analyze', DATA, '--json', '--plot', tmp_path / 'trial.png')
+    from_csv = json.loads(from_csv)
+    assert (tmp_path / 'trial.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    direct = csv_analysis.summary()
+    for key in direct:
+        assert key in from_bag and key in from_csv
+    for report in (from_bag, from_csv):
+        assert report['input']['frames'] == N_FRAMES
+        for key, value in direct.items():
+            if isinstance(value, dict):
+                assert report[key] == pytest.approx(value, rel=1e-9, nan_ok=True), key
+            elif isinstance(value, list):
+                assert report[key] == pytest.approx(value, rel=1e-9, abs=1e-12), key
+            else:
+                assert report[key] == pytest.approx(value, rel=1e-9), key
+    # the .mcap file alone is a bag too
+    code, from_mcap, _ = analyze_json(capsys, next(imported_bag.glob('*.mcap')))
+    assert code == 0 and from_mcap['phase_start_s'] == from_bag['phase_start_s']
+
+
+@real_trial
+def test_truncated_bag_is_analysed_up_to_the_damage(imported_bag, csv_analysis, capsys,
+                                                    tmp_path):
+    cut = cut_copy(imported_bag, tmp_path / 'cut', 0.92)
+    code, report, err = analyze_json(capsys, cut)
+    assert code == 0
+    assert 'warning' in err and 'damaged at byte' in err and 'file cut mid-record' in err
+    assert 'metadata.yaml is missing' in err
+    frames = report['input']['frames']
+    assert 50_000 < frames < N_FRAMES and report['input']['truncated']
+    # the strike (t ~ 2.62 s) lies before the damage: same result as the whole trial
+    full = csv_analysis.summary()
+    assert abs(report['phase_start_s']['IV'] - full['phase_start_s']['IV']) < 1e-3
+    assert report['peak_tip_speed_mps'] == pytest.approx(full['peak_tip_speed_mps'], rel=0.01)
+    # `mantis recover` of the same bag analyses the same
+    assert run(capsys, 'recover', cut, '-o', tmp_path / 'recovered')[0] == 0
+    code, recovered, err = analyze_json(capsys, tmp_path / 'recovered')
+    assert code == 0 and err == '' and recovered['input']['frames'] == frames
+    assert recovered['phase_start_s'] == report['phase_start_s']
+
+
+@real_trial
+def test_bag_cut_before_the_strike_fails_with_reason(imported_bag, capsys, tmp_path):
+    cut = cut_copy(imported_bag, tmp_path / 'early', 0.5)
+    code, _, err = analyze_json(capsys, cut)
+    assert code == 1
+    assert 'damaged at byte' in err and 'not enough data before the damage' in err
+    nothing = cut_copy(imported_bag, tmp_path / 'nothing', 0.001)
+    code, _, err = analyze_json(capsys, nothing)
+    assert code == 1 and 'no marker frames on /camera/markers' in err
+
+
+@real_trial
+def test_corrupted_chunk_is_reported_and_the_data_before_it_analysed(imported_bag, capsys,
+                                                                     tmp_path):
+    bad = tmp_path / 'corrupt'
+    shutil.copytree(imported_bag, bad)
+    mcap = next(bad.glob('*.mcap'))
+    with open(mcap, 'rb') as f:
+        summary = make_reader(f).get_summary()
+    markers = next(i for i, c in summary.channels.items() if c.topic == '/camera/markers')
+    chunks = sorted((c for c in summary.chunk_indexes if markers in c.message_index_offsets),
+                    key=lambda c: c.message_start_time)
+    chunk = chunks[int(len(chunks) * 0.9)]  # a chunk with marker frames, after the strike
+    data = bytearray(mcap.read_bytes())
+    at = chunk.chunk_start_offset + chunk.chunk_length // 2
+    data[at:at + 256] = bytes(range(256))  # garbage inside the chunk; summary still intact
+    mcap.write_bytes(bytes(data))
+    code, report, err = analyze_json(capsys, bad)
+    assert code == 0 and 'is damaged' in err and 'unreadable data' in err, err
+    assert 40_000 < report['input']['frames'] < N_FRAMES
+
+
+@real_trial
+def test_tendon_force_in_bag_gives_tendon_work(capsys, tmp_path, csv_analysis):
+    tracks = load_tracks(DATA)
+    path = tmp_path / 'with_force'
+    t_ns = np.round(tracks.time_s * 1e9).astype(np.int64)
+    period_ns, block = 50_000, 1000
+    force_t = np.arange(0, tracks.time_s[-1] + 0.05, period_ns / 1e9)
+    force = 9.0 + 0.5 * np.sin(force_t)
+    with BagWriter(path, sync_period_s=0) as bag:
+        frames = MarkerFrames(tracks.time_s, {n: xy / 1e3 for n, xy in tracks.markers_mm.items()})
+        for i, msg in enumerate(marker_blocks_to_msgs(frames)):
+            bag.write('/camera/markers', msg, int(t_ns[min((i + 1) * 1000, len(t_ns)) - 1]))
+        for start in range(0, len(force), block):
+            bag.write('/loadcell/force_block', force_block_to_msg(
+                start * period_ns, period_ns, force[start:start + block]),
+                (start + block) * period_ns)
+    trial = read_trial_bag(path)
+    assert trial.force_N is not None and len(trial.force_N) == len(force)
+    code, report, _ = analyze_json(capsys, path)
+    assert code == 0
+    assert np.isfinite(report['tendon_work_to_IV_mJ'])
+    assert report['phase_start_s'] == pytest.approx(csv_analysis.summary()['phase_start_s'],
+                                                    rel=1e-9)
+
+
+# ------------------------------------------------------------------------- bad input files
+def write_xlsx(path, labels, axes, rows, header=(('Record rate', 19000), ('Calibration', 0.1695))):
+    from openpyxl import Workbook
+    wb = Workbook()
+    ws = wb.active
+    for key, value in header:
+        ws.append([key, value])
+    ws.append([])
+    ws.append(labels)
+    ws.append(axes)
+    for row in rows:
+        ws.append(row)
+    wb.save(path)
+    return path
+
+
+def marker_rows(n, markers):
+    rng = np.random.default_rng(1)
+    return [[i, i / 19000] + list(rng.normal(0, 5, 2 * markers)) for i in range(n)]
+
+
+def test_xlsx_without_expected_columns_names_what_is_missing(tmp_path, capsys):
+    no_y = write_xlsx(tmp_path / 'no_y.xlsx',
+                      ['Frame', 'Time', 'mb1', '', 'mb2', '', 'ma1', '', 'ma2'],
+                      ['', '', 'x', 'y', 'x', 'y', 'x', 'y', 'x'], marker_rows(60, 4)[:])
+    code, out, err = run(capsys, 'import-tracking', no_y, '--out', tmp_path / 'b1')
+    assert code == 2 and 'ma2_y' in err and 'missing' in err
+    assert not (tmp_path / 'b1').exists()
+    no_time = write_xlsx(tmp_path / 'no_time.xlsx',
+                         ['Frame', 'mb1', '', 'mb2', '', 'ma1', '', 'ma2', ''],
+                         ['', 'x', 'y', 'x', 'y', 'x', 'y', 'x', 'y'],
+                         [r[:1] + r[2:] for r in marker_rows(60, 4)])
+    code, _, err = run(capsys, 'import-tracking', no_time, '--out', tmp_path / 'b2')
+    assert code == 2 and "'time'" in err
+    no_rate = write_xlsx(tmp_path / 'no_rate.xlsx',
+                         ['Frame', 'Time', 'mb1', '', 'mb2', '', 'ma1', '', 'ma2', ''],
+                         ['', '', 'x', 'y', 'x', 'y', 'x', 'y', 'x', 'y'], marker_rows(60, 4),
+                         header=(('Calibration', 0.1695),))
+    code, _, err = run(capsys, 'import-tracking', no_rate, '--out', tmp_path / 'b3')
+    assert code == 2 and 'record rate' in err
+    code, _, err = run(capsys, 'analyze', no_y)
+    assert code == 2 and 'ma2_y' in err
+
+
+def test_xlsx_markers_go_into_the_bag_in_metres(tmp_path, capsys):
+    rows = marker_rows(120, 4)
+    good = write_xlsx(tmp_path / 'good.xlsx',
+                      ['Frame', 'Time', 'Feature 1 (mb1)', '', 'mb2', '', 'ma1', '', 'ma2', ''],
+                      ['', '', 'x', 'y', 'x', 'y', 'x', 'y', 'x', 'y'], rows)
+    code, out, err = run(capsys, 'import-tracking', good, '--out', tmp_path / 'bag',
+                         '--no-angles')
+    assert code == 0, err
+    trial = read_trial_bag(tmp_path / 'bag')
+    table = np.array(rows)
+    np.testing.assert_allclose(trial.tracks.time_s, table[:, 1], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(trial.tracks.markers_mm['ma1'], table[:, 6:8], rtol=1e-12)
+    conditions = BagReader(tmp_path / 'bag').metadata('trial_conditions')
+    assert conditions['source_format'] == 'xlsx'
+    assert float(conditions['source_record_rate']) == 19000.0
+    assert float(conditions['source_calibration']) == 0.1695
+
+
+def test_analyze_bad_paths(tmp_path, capsys):
+    code, _, err = run(capsys, 'analyze', tmp_path / 'absent.csv')
+    assert code == 2 and 'absent.csv' in err
+    (tmp_path / 'empty_dir').mkdir()
+    code, _, err = run(capsys, 'analyze', tmp_path / 'empty_dir')
+    assert code == 1 and 'not a bag' in err

@@ -1,0 +1,332 @@
+"""The supervisor's logic without devices: force monitor, trial conditions, the trial state
+machine against a fake rig, and the supervisor node's refusals over ROS."""
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from mantis_rig.nodes.force_monitor import ForceMonitor
+from mantis_rig.nodes.trial_conditions import ConditionError, TrialConditions, check_value
+from mantis_rig.nodes.trial_sequence import DEVICE_NODES, Pending, TrialSequence
+
+RATE = 20_000.0
+
+
+# --------------------------------------------------------------------------- force monitor
+def _feed(monitor, forces, t0=1.0, block=200):
+    for i in range(0, len(forces), block):
+        monitor.feed(t0 + i / RATE, 1 / RATE, forces[i:i + block])
+
+
+def test_monitor_detects_the_release_jump_not_the_slow_pull():
+    t = np.arange(40_000) / RATE
+    forces = 11.3 - 1.2 * t + np.random.default_rng(0).normal(0, 0.01, t.size)
+    forces[30_000:] += 8.0                         # the strike, at t0 + 1.5 s
+    monitor = ForceMonitor(ceiling_n=30.0)
+    _feed(monitor, forces[:1000])
+    monitor.arm_release()
+    _feed(monitor, forces[1000:], t0=1.0 + 1000 / RATE)
+    assert monitor.release_t_s == pytest.approx(2.5, abs=2e-3)
+    assert monitor.samples == 40_000 and not monitor.gaps
+    assert monitor.duration_s == pytest.approx(2.0)
+    assert monitor.ceiling_hit is None and monitor.peak_n > 17
+
+
+def test_monitor_counts_gaps_and_ceiling():
+    monitor = ForceMonitor(ceiling_n=5.0)
+    monitor.feed(0.0, 1 / RATE, np.ones(100))
+    monitor.feed(200 / RATE, 1 / RATE, np.r_[np.ones(50), 6.0 * np.ones(50)])
+    assert monitor.gaps == [(pytest.approx(100 / RATE), 100)]
+    assert monitor.ceiling_hit == (pytest.approx(250 / RATE), 6.0)
+    assert monitor.release_t_s is None             # not armed
+
+
+# --------------------------------------------------------------------------- conditions
+def test_conditions_refuse_out_of_range_values_with_the_reason():
+    TrialConditions().validate()
+    with pytest.raises(ConditionError, match=r'pull_speed_mm_s = 5.0 mm/s is outside'):
+        TrialConditions(pull_speed_mm_s=5.0).validate()
+    with pytest.raises(ConditionError, match='backend = .warp. is not one of sim, hardware'):
+        check_value('backend', 'warp')
+    with pytest.raises(ConditionError, match='camera buffer'):
+        TrialConditions(pre_trigger_s=0.8, post_trigger_s=0.5).validate()
+    assert TrialConditions(operator_note='x').metadata()['operator_note'] == 'x'
+
+
+# --------------------------------------------------------------------------- fake rig
+class FakeRig:
+    """A rig in simulated time: pulling 3 mm unlatches (force jumps by 7 N), the tendon then
+    stiffens at 50 N/mm. Steps of 10 ms feed 200-sample force blocks to the sequence."""
+
+    def __init__(self, force0=11.3, release_mm=3.0, homed=True):
+        self.seq = None
+        self.t = 0.0
+        self.pos, self.v, self.target = 0.010, 0.0, None
+        self.origin = 0.010
+        self.force0, self.release_mm = force0, release_mm
+        self.released_at_pos = None
+        self.lifecycle = dict.fromkeys(DEVICE_NODES, 'unconfigured')
+        self.refuse = {}
+        self.calls, self.states, self.stops = [], [], 0
+        self.homed = homed
+        self.camera = None
+        self.trigger_t = None
+        self.markers_sent = False
+        self._run = threading.Event()
+
+    # RigPort
+    def now_s(self):
+        return self.t
+
+    def get_state(self, node):
+        return Pending((True, self.lifecycle[node]), done=True)
+
+    def change_state(self, node, transition):
+        if (node, transition) in self.refuse:
+            return Pending((False, self.refuse[node, transition]), done=True)
+        self.lifecycle[node] = {'configure': 'inactive', 'activate': 'active'}[transition]
+        return Pending((True, ''), done=True)
+
+    def call(self, service):
+        self.calls.append(service)
+        if service in self.refuse:
+            return Pending((False, self.refuse[service]), done=True)
+        if service == 'camera/trigger':
+            self.trigger_t = self.t
+            self.seq.on_camera_trigger(self.t)
+        if service == 'stage/home':
+            self.pos, self.homed = 0.0, True
+        if service == 'stage/stop':
+            self.v, self.target = 0.0, None
+        return Pending((True, 'ok'), done=True)
+
+    def set_camera(self, frame_rate_hz, pre_trigger_s, post_trigger_s):
+        self.camera = (frame_rate_hz, pre_trigger_s, post_trigger_s)
+        return Pending((True, ''), done=True)
+
+    def move_at(self, v):
+        self.v, self.target = v, None
+
+    def move_to(self, p):
+        self.target = p
+
+    def stop_stage(self):
+        self.stops += 1
+        self.v, self.target = 0.0, None
+
+    def publish_state(self, state, reason):
+        self.states.append(state)
+
+    # the world
+    def force(self, pos):
+        pulled_mm = (pos - self.origin) * 1e3
+        if self.released_at_pos is None and pulled_mm >= self.release_mm:
+            self.released_at_pos = pos
+        if self.released_at_pos is None:
+            return self.force0 - 0.5 * max(pulled_mm, 0)
+        return self.force0 + 7.0 + 50.0 * (pos - self.released_at_pos) * 1e3
+
+    def step(self, dt=0.01):
+        n = round(dt * RATE)
+        if self.target is not None:
+            dx = self.target - self.pos
+            self.v = np.sign(dx) * min(abs(dx) / dt, 2e-3) if abs(dx) > 1e-9 else 0.0
+        positions = self.pos + self.v * np.arange(1, n + 1) / RATE
+        forces = np.array([self.force(p) for p in positions])
+        t0 = self.t
+        self.pos = positions[-1]
+        self.t += dt
+        if self.target is not None and abs(self.target - self.pos) < 1e-9:
+            self.v, self.target = 0.0, None
+        seq = self.seq
+        seq.on_force_block(t0, 1 / RATE, forces)
+        seq.on_stage_state(self.pos, self.v)
+        if self.trigger_t is not None and not self.markers_sent and self.camera \
+                and self.t > self.trigger_t + self.camera[2]:
+            self.markers_sent = True
+            seq.on_markers(self.trigger_t - self.camera[1], self.trigger_t + self.camera[2], 100)
+
+    def run_world(self):
+        while not self._run.is_set():
+            self.step()
+            time.sleep(0.001)
+
+    def start(self, seq):
+        self.seq = seq
+        seq.on_stage_homed(self.homed)
+        self.step()
+        threading.Thread(target=self.run_world, daemon=True).start()
+        return self
+
+    def halt(self):
+        self._run.set()
+
+
+def run_trial(rig=None, timeout=30.0, before=None, **conditions):
+    rig = rig or FakeRig()
+    closed = []
+    seq = TrialSequence(rig, TrialConditions(**conditions), closed.append)
+    rig.start(seq)
+    if before:
+        before(rig, seq)
+    seq.start()
+    assert seq.finished.wait(timeout)
+    rig.halt()
+    assert closed == [seq.outcome]
+    return rig, seq, seq.outcome
+
+
+def test_a_trial_runs_through_every_phase_and_returns():
+    rig, seq, outcome = run_trial()
+    assert rig.states == ['configuring', 'taking_up_slack', 'arming', 'pulling', 'released',
+                          'stopping', 'returning', 'done']
+    assert outcome['result'] == 'completed' and outcome['reason'] == ''
+    assert set(rig.lifecycle.values()) == {'active'}
+    assert rig.calls[:2] == ['camera/arm', 'camera/trigger']
+    assert rig.camera == (19000.0, 0.3, 0.05)
+    assert outcome['release_in_camera_window'] == 'true'
+    assert float(outcome['release_time_s']) <= float(outcome['camera_trigger_time_s'])
+    assert abs(rig.pos - 0.010) < 20e-6           # back at the start
+    assert outcome['force_gaps'] == 0 and outcome['force_samples'] > 20_000
+    assert 'pulling@' in outcome['states']
+
+
+def test_homes_takes_up_slack_and_tares_when_needed():
+    rig = FakeRig(force0=0.0, homed=False)
+    rig.origin, rig.pos = 0.001, 0.0002
+    # slack until 1 mm, then the force rises as the stage moves
+    rig.force = lambda pos, f=rig.force: f(pos) + max(0.0, (pos - 0.001) * 1e3) * 4.0
+    _, seq, outcome = run_trial(rig, tare=True, start_position_mm=0.5)
+    assert rig.states[:5] == ['configuring', 'homing', 'taking_up_slack', 'taring', 'arming'], \
+        outcome
+    assert rig.calls[:2] == ['stage/home', 'loadcell/tare'] and rig.stops >= 1
+    assert 'loadcell/tare' in rig.calls
+    assert outcome['result'] == 'completed', outcome
+
+
+def test_force_ceiling_aborts_and_stops_the_stage():
+    rig, seq, outcome = run_trial(force_ceiling_n=15.0)
+    assert outcome['result'] == 'aborted'
+    assert outcome['reason'].startswith('force ceiling: ')
+    assert rig.states[-1] == 'aborted' and 'returning' not in rig.states
+    assert rig.v == 0.0 and rig.stops >= 1
+
+
+def test_travel_limit_aborts():
+    _, _, outcome = run_trial(travel_mm=1.0)
+    assert outcome['result'] == 'aborted'
+    assert outcome['reason'].startswith('travel limit: the stage moved ')
+
+
+def test_device_fault_and_operator_abort():
+    def fault_when_pulling(rig, seq):
+        def watch():
+            while seq.state != 'pulling':
+                time.sleep(0.001)
+            seq.on_device_fault('loadcell_node', 'DAQ overrun')
+        threading.Thread(target=watch, daemon=True).start()
+    rig, seq, outcome = run_trial(before=fault_when_pulling)
+    assert outcome['reason'] == 'device fault: loadcell_node: DAQ overrun'
+    assert rig.v == 0.0
+    assert seq.abort('again') == (False, 'no trial in progress (state aborted)')
+
+    def operator(rig, seq):
+        assert seq.abort('too early') == (False, 'no trial in progress (state idle)')
+
+        def watch():
+            while seq.state != 'pulling':
+                time.sleep(0.001)
+            assert seq.abort('operator')[0]
+            assert seq.abort('twice')[0] is False
+        threading.Thread(target=watch, daemon=True).start()
+    _, _, outcome = run_trial(before=operator)
+    assert outcome['reason'] == 'operator'
+
+
+def test_failed_bring_up_names_the_device_and_its_reason():
+    rig = FakeRig()
+    rig.refuse['camera_node', 'configure'] = 'transition refused'
+
+    def diagnose(rig, seq):
+        seq.on_device_message('camera_node', "unknown backend 'warp'")
+    _, _, outcome = run_trial(rig, before=diagnose)
+    assert outcome['result'] == 'aborted'
+    assert outcome['reason'] == ("camera_node configure failed: transition refused "
+                                 "(camera_node reports: unknown backend 'warp')")
+
+
+def test_timeout_when_the_release_never_comes():
+    rig = FakeRig(release_mm=100.0)
+    _, _, outcome = run_trial(rig, phase_timeout_s=1.0, travel_mm=24.0)
+    assert outcome['reason'] == 'timeout: release not detected (state pulling)'
+    assert rig.v == 0.0
+
+
+# --------------------------------------------------------------------------- over ROS
+@pytest.fixture
+def ros():
+    import rclpy
+    from rclpy.executors import MultiThreadedExecutor
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = MultiThreadedExecutor(num_threads=4, context=context)
+    thread = threading.Thread(target=executor.spin, daemon=True)
+    nodes = []
+
+    def add(node):
+        nodes.append(node)
+        executor.add_node(node)
+        return node
+    add.context = context
+    thread.start()
+    try:
+        yield add
+    finally:
+        for node in nodes:
+            if hasattr(node, 'shutdown_trial'):
+                node.shutdown_trial()
+        executor.shutdown(timeout_sec=5)
+        for node in nodes:
+            node.destroy_node()
+        rclpy.shutdown(context=context)
+
+
+def test_supervisor_refuses_bad_input_with_the_reason(ros, tmp_path, monkeypatch):
+    from rclpy.parameter import Parameter
+
+    from mantis_rig.nodes import rig_client
+    from mantis_rig.nodes.supervisor_node import SupervisorNode
+    from mantis_rig.nodes.trial_client import TrialClient
+    from mantis_rig.recording import BagReader
+
+    with pytest.raises(ConditionError, match="backend = 'warp' is not one of sim, hardware"):
+        SupervisorNode(context=ros.context,
+                       parameter_overrides=[Parameter('backend', value='warp')])
+    monkeypatch.setattr(rig_client, 'SERVICE_WAIT_S', 0.5)
+    node = ros(SupervisorNode(context=ros.context, parameter_overrides=[
+        Parameter('out', value=str(tmp_path))]))
+    client = ros(TrialClient(context=ros.context))
+    assert client.call('abort') == (False, 'no trial in progress (state idle)')
+    result = node.set_parameters([Parameter('pull_speed_mm_s', value=9.0)])[0]
+    assert not result.successful and 'pull_speed_mm_s' in result.reason
+    assert '2.4' in result.reason
+    result = node.set_parameters([Parameter('medium', value='honey')])[0]
+    assert result.reason == "medium = 'honey' is not one of air, water, vacuum"
+    assert node.set_parameters([Parameter('operator_note', value='no devices')])[0].successful
+
+    # no device nodes: the trial starts, then aborts naming the missing service
+    started, message, final = client.run_trial(timeout_s=30)
+    assert started and message.startswith('trial started; logging to ')
+    assert final == 'aborted'
+    node.sequence.finished.wait(10)
+    bag = BagReader(message.rsplit(' ', 1)[-1])
+    assert bag.complete
+    outcome = bag.metadata('trial_outcome')
+    assert outcome['result'] == 'aborted'
+    assert outcome['reason'] == ('stage_node get_state failed: service /stage_node/get_state '
+                                 'is not available')
+    assert bag.metadata('trial_conditions')['operator_note'] == 'no devices'
+    states = [m.message.data for m in bag.messages(['/supervisor/state'])]
+    assert states[-2:] == ['configuring', 'aborted']
