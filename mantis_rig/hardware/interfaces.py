@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import abc
 from dataclasses import dataclass, field
+import math
 from typing import Optional
 
 import numpy as np
@@ -182,6 +183,20 @@ class MarkerFrames:
 
     time_s: np.ndarray                     # (n,)
     markers_mm: dict = field(default_factory=dict)   # name -> (n, 2) array; mb1..mb3, ma1, ma2
+
+
+def check_camera_config(config: CameraConfig, max_frame_rate_hz: float) -> None:
+    """Refuse a frame rate outside (0, max] and pre/post-trigger durations that are not >= 0."""
+    rate_hz = config.frame_rate_hz
+    if not rate_hz > 0:
+        raise ConfigurationError(f'frame rate {rate_hz} frames/s must be > 0 frames/s')
+    if rate_hz > max_frame_rate_hz:
+        raise ConfigurationError(f'frame rate {rate_hz:g} frames/s exceeds the camera '
+                                 f'ceiling {max_frame_rate_hz:g} frames/s')
+    for name in ('pre_trigger_s', 'post_trigger_s'):
+        value = getattr(config, name)
+        if not (value >= 0 and math.isfinite(value)):
+            raise ConfigurationError(f'{name} {value} s must be finite and ≥ 0 s')
 
 
 class CameraTrigger(Device):

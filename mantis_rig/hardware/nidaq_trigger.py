@@ -12,6 +12,7 @@ from mantis_rig.hardware.interfaces import (
     CameraTrigger,
     ConfigurationError,
     DeviceError,
+    check_camera_config,
 )
 from mantis_rig.hardware.nidaq import (
     close_quietly,
@@ -107,16 +108,7 @@ class NidaqCameraTrigger(CameraTrigger):
         close_quietly(task)
 
     def arm(self, config: CameraConfig) -> None:
-        rate_hz = config.frame_rate_hz
-        if not rate_hz > 0:
-            raise ConfigurationError(f'frame rate {rate_hz} frames/s must be > 0 frames/s')
-        if rate_hz > self.max_frame_rate_hz:
-            raise ConfigurationError(f'frame rate {rate_hz:g} frames/s exceeds the camera '
-                                     f'ceiling {self.max_frame_rate_hz:g} frames/s')
-        for name in ('pre_trigger_s', 'post_trigger_s'):
-            value = getattr(config, name)
-            if not (value >= 0 and math.isfinite(value)):
-                raise ConfigurationError(f'{name} {value} s must be finite and ≥ 0 s')
+        check_camera_config(config, self.max_frame_rate_hz)
         if self._task is None:
             raise DeviceError(f'camera trigger on {self._output} is not open: open() first')
         self._config = config

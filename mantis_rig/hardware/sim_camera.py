@@ -23,6 +23,7 @@ from .interfaces import (
     ConfigurationError,
     DeviceError,
     MarkerFrames,
+    check_camera_config,
 )
 from .world_port import WorldPort
 
@@ -30,13 +31,7 @@ MAX_RECORD_S = 1.0       # the buffer (and the simulated world's kept history) h
 
 
 def validate_camera_config(config: CameraConfig, max_frame_rate_hz: float) -> None:
-    if not 0.0 < config.frame_rate_hz <= max_frame_rate_hz:
-        raise ConfigurationError(f'frame rate {config.frame_rate_hz} frames/s is outside '
-                                 f'(0, {max_frame_rate_hz:.0f}] frames/s')
-    for name in ('pre_trigger_s', 'post_trigger_s'):
-        value = getattr(config, name)
-        if not (value >= 0.0 and math.isfinite(value)):
-            raise ConfigurationError(f'{name} {value} s must be a finite duration >= 0 s')
+    check_camera_config(config, max_frame_rate_hz)
     if config.pre_trigger_s + config.post_trigger_s > MAX_RECORD_S:
         raise ConfigurationError(
             f'pre_trigger_s + post_trigger_s = '
