@@ -16,7 +16,6 @@ from .nodes.trial_conditions import (
 
 USAGE_ERROR = 2
 PROCESSES = ('single', 'multi')
-SINGLE_PROCESS_RTF = 0.5
 
 
 def add_commands(commands) -> None:
@@ -49,11 +48,9 @@ def _stack_arguments(parser) -> None:
                         'or a scene parameter (e.g. loadcell.noise_N=0.02); repeatable')
     parser.add_argument('--processes', choices=PROCESSES, default='single',
                         help='single: all nodes in this process; multi: one process per node')
-    parser.add_argument('--real-time-factor', type=float, default=None,
-                        help='simulated seconds per wall second (sim backend; default 1 with '
-                        f'--processes multi, {SINGLE_PROCESS_RTF} in one process, where all '
-                        'nodes share one interpreter: at 1 the release reaches the supervisor '
-                        'too late to stop the stage before the held tendon loads up)')
+    parser.add_argument('--real-time-factor', type=float, default=1.0,
+                        help='simulated seconds per wall second (sim backend; default 1; '
+                        'simulated time slips when the machine cannot keep up)')
     parser.add_argument('--seed', type=int, default=0, help='sensor noise seed (sim backend)')
     parser.add_argument('--log-dir', type=Path,
                         help='with --processes multi: write each node\'s output here')
@@ -77,8 +74,6 @@ def stack_config(args):
     """A StackConfig from the command line; ConditionError / SceneError say what is wrong."""
     from .nodes.bringup import StackConfig
 
-    if args.real_time_factor is None:
-        args.real_time_factor = 1.0 if args.processes == 'multi' else SINGLE_PROCESS_RTF
     if not (args.real_time_factor > 0 and math.isfinite(args.real_time_factor)):
         raise ConditionError(f'--real-time-factor {args.real_time_factor} must be > 0')
     supervisor, scene_overrides = {}, []

@@ -16,7 +16,7 @@ import tempfile
 # Fast DDS maps a domain to UDP ports 7400 + 250 * id; ids up to 101 stay below the ephemeral
 # port range on Linux. Domain 0 is left to whatever else runs on the machine.
 DOMAIN_IDS = range(1, 102)
-_held_locks = []
+_held_locks: dict[int, object] = {}
 
 
 def _lock_dir() -> Path:
@@ -36,10 +36,17 @@ def claim_free_domain() -> int:
         except OSError:
             handle.close()
             continue
-        _held_locks.append(handle)
+        _held_locks[domain] = handle
         return domain
     raise RuntimeError(f'every ROS domain id in {DOMAIN_IDS.start}..{DOMAIN_IDS.stop - 1} is '
                        f'claimed by another process on this machine')
+
+
+def release_domain(domain: int) -> None:
+    """Give back a domain this process claimed (no-op for one it does not hold)."""
+    handle = _held_locks.pop(domain, None)
+    if handle is not None:
+        handle.close()
 
 
 def claim_local_domain(env: dict | None = None) -> dict:

@@ -70,7 +70,9 @@ class CommandedPull:
 
     Commands arrive one after the other at the world's current time. A new velocity is
     reached at a constant acceleration; a stop (velocity 0) is immediate, as the controller's
-    abort. Between knots the acceleration is constant.
+    abort. A move to a position starts from rest (a moving stage stops first) and follows a
+    trapezoidal profile (a triangle for a short move) that ends at rest on the target. Between
+    knots the acceleration is constant.
     """
 
     def __init__(self, accel_mm_per_ms2: float):
@@ -89,6 +91,25 @@ class CommandedPull:
         self.knots.append((t, x, v, accel))
         self.knots.append((t + ramp, x + v * ramp + 0.5 * accel * ramp * ramp,
                            velocity_mm_per_ms, 0.0))
+
+    def move_to(self, t: float, target_mm: float, speed_mm_per_ms: float) -> None:
+        x = self.pulled(t)[0]
+        self.knots = [k for k in self.knots if k[0] < t]
+        distance, sign = abs(target_mm - x), math.copysign(1.0, target_mm - x)
+        if distance == 0.0 or speed_mm_per_ms <= 0.0:
+            self.knots.append((t, x, 0.0, 0.0))
+            return
+        if not math.isfinite(self.a):
+            self.knots += [(t, x, sign * speed_mm_per_ms, 0.0),
+                           (t + distance / speed_mm_per_ms, target_mm, 0.0, 0.0)]
+            return
+        a, v = self.a, min(speed_mm_per_ms, math.sqrt(distance * self.a))
+        ramp, ramp_mm = v / a, 0.5 * v * v / a
+        cruise = (distance - 2.0 * ramp_mm) / v
+        self.knots += [(t, x, 0.0, sign * a),
+                       (t + ramp, x + sign * ramp_mm, sign * v, 0.0),
+                       (t + ramp + cruise, target_mm - sign * ramp_mm, sign * v, -sign * a),
+                       (t + 2.0 * ramp + cruise, target_mm, 0.0, 0.0)]
 
     def pulled(self, t: float) -> tuple[float, float, float]:
         if t <= 0.0:

@@ -36,6 +36,7 @@ SEPARATION = 1e-7
 # stage stop under a moving arm leaves it separating at the stage's speed.
 GRAZING_TIME_MS = 0.1
 MAX_EVENTS_AT_ONE_INSTANT = 12
+MIN_SPAN_MS = 1e-9
 STATE_SCALE = (1.0, 1.0, 1.0, 1.0, 100.0, 100.0)   # rad, rad, rad/ms, rad/ms, mJ, mJ
 
 
@@ -331,8 +332,11 @@ class HybridSimulator:
         run, mode = self.run_data, self.mode
         t, s, phase = self.t, self.state, self.phase
         breakpoints = sorted(b for b in self.model.drive.breakpoints() if t < b < t_stop)
-        while t < min(t_stop, self.stop_at):
-            horizon = min([t_stop, self.stop_at] + [b for b in breakpoints if b > t + 1e-12])
+        # A span shorter than MIN_SPAN_MS is rounding (a stop a hair past a drive knot), not
+        # motion: integrating it makes LSODA refuse its input.
+        while min(t_stop, self.stop_at) - t > MIN_SPAN_MS:
+            horizon = min([t_stop, self.stop_at]
+                          + [b for b in breakpoints if b > t + MIN_SPAN_MS])
             name, t_new, s = self._segment(mode, phase, self.after_peak, t, s, horizon)
             self._same_instant = self._same_instant + 1 if t_new - self._last_t < 1e-9 else 0
             if self._same_instant > MAX_EVENTS_AT_ONE_INSTANT:

@@ -8,17 +8,22 @@ tension and the markers' positions in the camera frame. Sensor imperfections (lo
 bandwidth, noise, ADC, pixel quantisation) belong to mantis_sim.sensors, not here.
 
 The mechanism is simulated in full through the release and the strike, and for
-SETTLE_AFTER_PEAK_MS after the peak tip speed. Then it is held in the pose it reached: the
+SETTLE_AFTER_PEAK_MS after the peak tip speed. Then the arm is held where it swung to: the
 model has no target for the arm to hit, and its free rebound (resting contact, slack-taut
-chatter of a rigid tendon) is not what anyone measures on the rig. While held, the tendon
-force follows the stage quasi-statically through the tendon's stiffness (tendon.stiffness,
-also for a rigid-tendon scene), never below zero.
+chatter of a rigid tendon) is not what anyone measures on the rig. The body is not frozen:
+the spring is still loaded after the strike, so while the stage moves on, the body turns in
+the (linearised) quasi-static balance of spring torque and tendon tension, and the tendon
+stretches by its own stiffness (tendon.stiffness, also for a rigid-tendon scene). The tension
+changes at the series stiffness of tendon and spring-through-linkage (about -0.6 N/mm for
+air_23mm: the linkage softens), not at the tendon's 50 N/mm; it never falls below zero.
+
+Stage moves to a position (move_stage_to) are executed by the world, as the KDC101 executes
+MOT_MOVE_ABSOLUTE: a trapezoidal profile that ends at rest exactly on the target.
 
 Units at this interface are SI (s, m, N); inside, mantis_sim's g, mm, ms.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 import math
 
 import numpy as np
@@ -74,6 +79,13 @@ class World:
         if self._held is None:
             self._after_drive_step(self._t_ms)
 
+    def move_stage_to(self, position_m: float, speed_m_per_s: float) -> None:
+        """Move the stage to position_m at up to speed_m_per_s, ending at rest on the target."""
+        target_mm = position_m * 1e3 - self._start_position_mm
+        self._drive.move_to(self._t_ms, target_mm, abs(float(speed_m_per_s)))
+        if self._held is None:
+            self._after_drive_step(self._t_ms)
+
     def stage_position_m(self) -> float:
         return (self._start_position_mm + self._drive.pulled(self._t_ms)[0]) * 1e-3
 
@@ -118,7 +130,7 @@ class World:
         forces = np.empty(times_ms.size)
         moving = self._simulated(times_ms)
         if self._held is not None:
-            forces[~moving] = self._held.tension(times_ms[~moving], self._drive)
+            forces[~moving] = self._held.balance(self._pulled_mm(times_ms[~moving]))[1]
         segments = self._sim.run_data.segments
         index = self._segment_index(times_ms[moving])
         simulated = np.empty(index.size)
@@ -131,20 +143,28 @@ class World:
 
     def marker_positions_m(self, times_s) -> dict:
         """Marker positions (name -> (n, 2) m) in the camera frame at each time."""
-        times_ms = self._check_times(times_s)
-        moving = self._simulated(times_ms)
-        segments = self._sim.run_data.segments
-        index = self._segment_index(times_ms)
-        out = {name: np.empty((times_ms.size, 2)) for name in (*BODY_MARKERS_MM, *ARM_MARKERS_MM)}
-        for k, t in enumerate(times_ms):
-            if moving[k]:
-                seg = segments[index[k]]
-                th1, th3 = seg.dense(min(max(t, seg.t[0]), seg.t[-1]))[:2]
-            else:
-                th1, th3 = self._held.th1, self._held.th3
-            for name, xy in self._markers_mm(th1, th3).items():
+        th1, th3 = self.joint_angles_rad(times_s)
+        out = {name: np.empty((th1.size, 2)) for name in (*BODY_MARKERS_MM, *ARM_MARKERS_MM)}
+        for k in range(th1.size):
+            for name, xy in self._markers_mm(th1[k], th3[k]).items():
                 out[name][k] = xy
         return {name: xy * 1e-3 for name, xy in out.items()}
+
+    def joint_angles_rad(self, times_s) -> tuple[np.ndarray, np.ndarray]:
+        """(theta1, theta3) at each time (within the kept history, not past time_s)."""
+        times_ms = self._check_times(times_s)
+        moving = self._simulated(times_ms)
+        th1, th3 = np.empty(times_ms.size), np.empty(times_ms.size)
+        if self._held is not None and not moving.all():
+            th1[~moving] = self._held.balance(self._pulled_mm(times_ms[~moving]))[0]
+            th3[~moving] = self._held.th3
+        segments = self._sim.run_data.segments
+        index = self._segment_index(times_ms)
+        for k in np.flatnonzero(moving):
+            seg = segments[index[k]]
+            t = times_ms[k]
+            th1[k], th3[k] = seg.dense(min(max(t, seg.t[0]), seg.t[-1]))[:2]
+        return th1, th3
 
     # --- internals -------------------------------------------------------------------------
     def _simulated(self, times_ms: np.ndarray) -> np.ndarray:
@@ -161,8 +181,12 @@ class World:
         sim = self._sim
         seg = sim.run_data.segments[-1]
         tension = sim.dynamics_at(seg, sim.t, sim.state).tension_N
-        self._held = _HeldPose(sim.t, sim.state[0], sim.state[1], tension,
-                               self._drive.pulled(sim.t)[0], sim.model.k_t)
+        self._held = _HeldPose(self._mech, sim.t, float(sim.state[0]), float(sim.state[1]),
+                               tension, self._drive.pulled(sim.t)[0], sim.model.k_t,
+                               self.scene.spring.k_Nmm_per_rad)
+
+    def _pulled_mm(self, times_ms: np.ndarray) -> np.ndarray:
+        return np.array([self._drive.pulled(t)[0] for t in times_ms])
 
     def _check_times(self, times_s) -> np.ndarray:
         times_ms = np.atleast_1d(np.asarray(times_s, dtype=float)) * 1e3
@@ -224,18 +248,33 @@ class World:
         sim.state = sim._retension(mode, t, s)
 
 
-@dataclass(frozen=True)
 class _HeldPose:
-    """The mechanism at rest after the strike; the tendon follows the stage elastically."""
+    """The arm held at th3 after the strike; the body in quasi-static balance, linearised about
+    the pose at the hold.
 
-    t_ms: float
-    th1: float
-    th3: float
-    tension_N: float
-    pulled_mm: float
-    stiffness_N_per_mm: float
+    With the arm fixed, the torques on the body balance, F l_1(theta1) = k_s (rest - theta1) +
+    tau0 (tau0: what the spring does not explain at the hold: gravity, the strike's residue),
+    and the tendon stretches by its stiffness k_t. For a stage that has pulled dp further:
+    dF = k dp with 1/k = 1/k_t + l_1^2 / (k_s + F l_11) (tendon in series with the spring as
+    the linkage presents it), and the body turns by -(dp - dF/k_t)/l_1. Linearised on purpose:
+    the exact balance runs into the body's toggle (l_1 -> 0, F -> inf) when the stage returns a
+    few mm, a pose the real arm, which is not held, never reaches. A tension that would fall
+    below zero is a slack tendon: zero.
+    """
 
-    def tension(self, times_ms: np.ndarray, drive) -> np.ndarray:
-        pulled = np.array([drive.pulled(t)[0] for t in times_ms])
-        return np.maximum(0.0, self.tension_N
-                          + self.stiffness_N_per_mm * (pulled - self.pulled_mm))
+    def __init__(self, mech, t_ms: float, th1: float, th3: float, tension_N: float,
+                 pulled_mm: float, k_tendon_N_per_mm: float, k_spring_Nmm_per_rad: float):
+        self.t_ms, self.th1, self.th3 = t_ms, th1, th3
+        self.tension_N, self.pulled_mm = max(tension_N, 0.0), pulled_mm
+        self.k_t = k_tendon_N_per_mm
+        tg = mech.tendon(th1, th3)
+        self.l_1 = tg.d1
+        linkage = k_spring_Nmm_per_rad + self.tension_N * tg.d11
+        self.stiffness_N_per_mm = linkage / (linkage / self.k_t + self.l_1 ** 2)
+
+    def balance(self, pulled_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(theta1 rad, tension N) for the stage pulled this far (mm, same origin as held)."""
+        further = np.asarray(pulled_mm, dtype=float) - self.pulled_mm
+        change = self.stiffness_N_per_mm * further
+        th1 = self.th1 - (further - change / self.k_t) / self.l_1
+        return th1, np.maximum(self.tension_N + change, 0.0)

@@ -256,6 +256,49 @@ def test_failed_bring_up_names_the_device_and_its_reason():
                                  "(camera_node reports: unknown backend 'warp')")
 
 
+class LossyRig(FakeRig):
+    """Loses the first reply to each node's get_state and to stage_node's configure, as DDS can
+    while it is still matching a node that has just started; the transition takes effect."""
+
+    def __init__(self):
+        super().__init__()
+        self.lost = set()
+        self.queries = dict.fromkeys(DEVICE_NODES, 0)
+
+    def get_state(self, node):
+        self.queries[node] += 1
+        if ('get_state', node) not in self.lost:
+            self.lost.add(('get_state', node))
+            return Pending()                       # never answered
+        return super().get_state(node)
+
+    def change_state(self, node, transition):
+        answer = super().change_state(node, transition)
+        if (node, transition) == ('stage_node', 'configure') and 'configure' not in self.lost:
+            self.lost.add('configure')
+            return Pending()
+        return answer
+
+
+def test_lost_lifecycle_replies_are_recovered_by_asking_again(monkeypatch):
+    from mantis_rig.nodes import trial_sequence
+    monkeypatch.setattr(trial_sequence, 'QUERY_RETRY_S', 0.2)
+    rig, seq, outcome = run_trial(LossyRig())
+    assert outcome['result'] == 'completed', outcome
+    assert set(rig.lifecycle.values()) == {'active'}
+    # a second query for each node, and one more for stage_node's unanswered configure
+    assert rig.queries == {'stage_node': 3, 'loadcell_node': 2, 'camera_node': 2}
+
+
+def test_an_abort_closes_the_log_once_the_stage_reports_rest():
+    rig, seq, outcome = run_trial(force_ceiling_n=15.0)
+    assert outcome['stage_stopped'] == 'true'
+    _, _, outcome = run_trial(FakeRig(), before=lambda rig, seq: rig.halt(),
+                              phase_timeout_s=0.5)
+    assert outcome['result'] == 'aborted'
+    assert outcome['stage_stopped'] == 'unconfirmed'      # the stage never reported
+
+
 def test_timeout_when_the_release_never_comes():
     rig = FakeRig(release_mm=100.0)
     _, _, outcome = run_trial(rig, phase_timeout_s=1.0, travel_mm=24.0)

@@ -94,6 +94,10 @@ class LocalWorldPort(WorldPort):
         with self.runner.lock:
             self.world.set_stage_velocity(velocity_m_per_s)
 
+    def move_stage_to(self, position_m: float, speed_m_per_s: float) -> None:
+        with self.runner.lock:
+            self.world.move_stage_to(position_m, speed_m_per_s)
+
     def stage_state(self) -> tuple[float, float]:
         with self.runner.lock:
             return self.world.stage_position_m(), self.world.stage_velocity_m_per_s()

@@ -3,7 +3,8 @@
 The soft travel limits and the speed ceiling are enforced here as in the real driver: speeds
 above the ceiling and targets outside the limits are refused, and a velocity move is stopped
 by a watchdog thread before it leaves the soft limits. A stop is immediate (the controller's
-abort). Positions are the world's stage positions; the stage starts homed at
+abort). Moves to a position are executed by the world, as the controller executes them: they
+end at rest on the target. Positions are the world's stage positions; the stage starts homed at
 drive.start_position_mm, as after the session's homing.
 """
 from __future__ import annotations
@@ -23,8 +24,9 @@ from .world_port import WorldPort
 
 HOME_POSITION_M = 0.0
 HOMING_SPEED_M_PER_S = 2.0e-3
-# Moves end within this much simulated time of their target (the world advances in steps).
+# A move is checked for arrival this often (simulated time); the world ends it on the target.
 POLL_S = 0.002
+ARRIVED_M = 1e-9
 WALL_POLL_S = 0.001
 
 
@@ -111,28 +113,26 @@ class SimStage(Stage):
 
     def _drive_until(self, target_m: float, speed: float, timeout_s: float,
                      check_limits: bool) -> None:
+        """Have the world move the stage to target_m (as the controller executes an absolute
+        move) and wait until it rests there; a stop() meanwhile ends the move."""
         deadline = time.monotonic() + timeout_s
-        position, _ = self.port.stage_state()
-        direction = 1.0 if target_m > position else -1.0
-        if position == target_m:
-            return
         self._stop_watch.clear()
-        self._command(direction * speed)
-        try:
-            while True:
-                position, velocity = self.port.stage_state()
-                if (target_m - position) * direction <= 0:
-                    break
-                if self._stop_watch.is_set():
-                    raise DeviceError(f'move to {target_m * 1e3:.4f} mm was stopped at '
-                                      f'{position * 1e3:.4f} mm')
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    raise DeviceError(f'simulated stage did not reach {target_m * 1e3:.4f} mm '
-                                      f'within {timeout_s} s (at {position * 1e3:.4f} mm)')
-                self.port.wait_until(self.port.now_s() + POLL_S, remaining)
-        finally:
-            self._command(0.0)
+        with self._lock:
+            self._velocity_cmd = 0.0
+            self.port.move_stage_to(target_m, speed)
+        while True:
+            position, velocity = self.port.stage_state()
+            if abs(position - target_m) <= ARRIVED_M and velocity == 0.0:
+                return
+            if self._stop_watch.is_set():
+                raise DeviceError(f'move to {target_m * 1e3:.4f} mm was stopped at '
+                                  f'{position * 1e3:.4f} mm')
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                self.stop()
+                raise DeviceError(f'simulated stage did not reach {target_m * 1e3:.4f} mm '
+                                  f'within {timeout_s} s (at {position * 1e3:.4f} mm)')
+            self.port.wait_until(self.port.now_s() + POLL_S, remaining)
 
     def _start_watchdog(self, velocity: float) -> None:
         self._stop_watch.set()

@@ -28,6 +28,10 @@ class WorldPort(abc.ABC):
         """Command the simulated stage; takes effect at the world's current time."""
 
     @abc.abstractmethod
+    def move_stage_to(self, position_m: float, speed_m_per_s: float) -> None:
+        """Start a move of the simulated stage to position_m, ending at rest on it."""
+
+    @abc.abstractmethod
     def stage_state(self) -> tuple[float, float]:
         """(position m, velocity m/s) of the simulated stage now."""
 

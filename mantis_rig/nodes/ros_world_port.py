@@ -12,6 +12,7 @@ another thread until the messages it waits for arrive. Held data:
 from __future__ import annotations
 
 from collections import deque
+import math
 import threading
 import time
 
@@ -19,7 +20,7 @@ import numpy as np
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64, Float64MultiArray
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from mantis_rig.hardware.interfaces import DeviceError
 from mantis_rig.hardware.world_port import WorldPort, WorldTimeout
@@ -27,7 +28,9 @@ from mantis_rig.recording.marker_block import marker_block_from_msg
 
 FORCE_TOPIC = '/sim/tendon_force'
 STAGE_STATE_TOPIC = '/sim/stage_state'
-VELOCITY_TOPIC = '/sim/stage_velocity_command'
+# Velocity commands and moves share one topic so that the world applies them in the order sent.
+STAGE_COMMAND_TOPIC = '/sim/stage_command'
+VELOCITY_COMMAND, MOVE_COMMAND = 'velocity', 'move_to'
 CAMERA_REQUEST_TOPIC = '/sim/camera_request'
 CAMERA_FRAMES_TOPIC = '/sim/camera_frames'
 # Deep enough to ride out a few seconds of a busy executor at 100 world steps per second.
@@ -55,7 +58,7 @@ class RosWorldPort(WorldPort):
         self._replies: deque = deque(maxlen=8)         # MarkerFrames from the world
         self._closed = False
         group = MutuallyExclusiveCallbackGroup()
-        self._velocity_pub = node.create_publisher(Float64, VELOCITY_TOPIC, 10)
+        self._command_pub = node.create_publisher(Float64MultiArray, STAGE_COMMAND_TOPIC, 10)
         self._request_pub = node.create_publisher(Float64MultiArray, CAMERA_REQUEST_TOPIC, 10)
         self._subs = [node.create_subscription(Float64MultiArray, CAMERA_FRAMES_TOPIC,
                                                self._on_frames, 10, callback_group=group)]
@@ -79,7 +82,7 @@ class RosWorldPort(WorldPort):
             self._cond.notify_all()
         for sub in self._subs:
             self.node.destroy_subscription(sub)
-        self.node.destroy_publisher(self._velocity_pub)
+        self.node.destroy_publisher(self._command_pub)
         self.node.destroy_publisher(self._request_pub)
 
     def wait_for_world(self, timeout_s: float) -> None:
@@ -104,9 +107,15 @@ class RosWorldPort(WorldPort):
                    f'simulated time {t_s:.4f} s')
 
     def set_stage_velocity(self, velocity_m_per_s: float) -> None:
+        self._command(VELOCITY_COMMAND, velocity_m_per_s)
+
+    def move_stage_to(self, position_m: float, speed_m_per_s: float) -> None:
+        self._command(MOVE_COMMAND, position_m, speed_m_per_s)
+
+    def _command(self, kind: str, *values: float) -> None:
         if self._closed:
             raise DeviceError('the world port is closed')
-        self._velocity_pub.publish(Float64(data=float(velocity_m_per_s)))
+        self._command_pub.publish(stage_command_msg(kind, *values))
 
     def stage_state(self) -> tuple[float, float]:
         with self._cond:
@@ -249,3 +258,25 @@ class RosWorldPort(WorldPort):
         with self._cond:
             self._replies.append(frames)
             self._cond.notify_all()
+
+
+def stage_command_msg(kind: str, *values: float) -> Float64MultiArray:
+    """A stage command for sim_world_node: the kind in the layout's label, then its values
+    ('velocity': [m/s]; 'move_to': [target m, speed m/s])."""
+    msg = Float64MultiArray(data=[float(v) for v in values])
+    msg.layout.dim = [MultiArrayDimension(label=kind, size=len(values), stride=len(values))]
+    return msg
+
+
+def stage_command_from_msg(msg: Float64MultiArray) -> tuple[str, list]:
+    """(kind, values) of a stage command; ValueError naming what is wrong."""
+    kind = msg.layout.dim[0].label if msg.layout.dim else ''
+    expected = {VELOCITY_COMMAND: 1, MOVE_COMMAND: 2}.get(kind)
+    values = list(msg.data)
+    if expected is None:
+        raise ValueError(f'unknown stage command {kind!r} (expected {VELOCITY_COMMAND!r} or '
+                         f'{MOVE_COMMAND!r})')
+    if len(values) != expected or not all(map(math.isfinite, values)):
+        raise ValueError(f'stage command {kind!r} needs {expected} finite value(s), got '
+                         f'{values}')
+    return kind, values

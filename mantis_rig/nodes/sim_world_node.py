@@ -24,7 +24,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64, Float64MultiArray
+from std_msgs.msg import Float64MultiArray
 
 from mantis_rig.hardware.local_world import WorldRunner
 from mantis_rig.nodes.device_node import Param, declare, param_value, run_node, time_msg
@@ -32,9 +32,11 @@ from mantis_rig.nodes.ros_world_port import (
     CAMERA_FRAMES_TOPIC,
     CAMERA_REQUEST_TOPIC,
     FORCE_TOPIC,
+    MOVE_COMMAND,
+    STAGE_COMMAND_TOPIC,
     STAGE_STATE_TOPIC,
     STREAM_QOS,
-    VELOCITY_TOPIC,
+    stage_command_from_msg,
 )
 from mantis_rig.recording.force_block import force_block_to_msg
 from mantis_rig.recording.marker_block import marker_block_to_msg
@@ -78,7 +80,8 @@ class SimWorldNode(Node):
         self._stage_pub = self.create_publisher(JointState, STAGE_STATE_TOPIC, STREAM_QOS)
         self._frames_pub = self.create_publisher(Float64MultiArray, CAMERA_FRAMES_TOPIC, 10)
         self._clock_pub = self.create_publisher(Clock, '/clock', QoSProfile(depth=10))
-        self.create_subscription(Float64, VELOCITY_TOPIC, self._on_velocity, 10)
+        self.create_subscription(Float64MultiArray, STAGE_COMMAND_TOPIC, self._on_stage_command,
+                                 10)
         self.create_subscription(Float64MultiArray, CAMERA_REQUEST_TOPIC, self._on_request, 10)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_timer(1.0, self._publish_diagnostics,
@@ -127,11 +130,11 @@ class SimWorldNode(Node):
         return SetParametersResult(successful=True)
 
     # --- from the device nodes (executor threads) -------------------------------------------
-    def _on_velocity(self, msg: Float64) -> None:
-        if not math.isfinite(msg.data):
-            self.get_logger().warning(f'ignored stage velocity command {msg.data}')
-            return
-        self._inbox.append(('velocity', msg.data))
+    def _on_stage_command(self, msg: Float64MultiArray) -> None:
+        try:
+            self._inbox.append(stage_command_from_msg(msg))
+        except ValueError as exc:
+            self.get_logger().warning(f'{STAGE_COMMAND_TOPIC}: ignored: {exc}')
 
     def _on_request(self, msg: Float64MultiArray) -> None:
         if len(msg.data) != 3:
@@ -150,11 +153,13 @@ class SimWorldNode(Node):
     def before_step(self) -> float:
         """Under the world's lock: apply what arrived; return the step's target time."""
         while self._inbox:
-            kind, value = self._inbox.popleft()
-            if kind == 'velocity':
-                self.world.set_stage_velocity(value)
+            kind, values = self._inbox.popleft()
+            if kind == 'request':
+                self._requests.append(values)
+            elif kind == MOVE_COMMAND:
+                self.world.move_stage_to(*values)
             else:
-                self._requests.append(value)
+                self.world.set_stage_velocity(*values)
         self._step_index += 1
         return self._step_index * self.step_s
 

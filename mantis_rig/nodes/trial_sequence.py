@@ -29,6 +29,9 @@ AT_REST_M_PER_S = 1e-6
 SETTLED_S = 0.3                  # a move has ended when the stage rested this long (wall time)
 MOVE_ATTEMPTS = 3
 HOMED_WAIT_S = 3.0               # unknown after this long: go on without homing
+QUERY_RETRY_S = 5.0              # an idempotent query unanswered this long is sent again
+STOP_CONFIRM_S = 2.0             # after an abort, wait this long for the stage to report rest
+TRANSITION_GOALS = {'configure': 'inactive', 'activate': 'active'}
 
 
 class TrialAborted(Exception):
@@ -91,6 +94,7 @@ class TrialSequence:
         self.stage_position_m: float | None = None
         self.stage_velocity_m_per_s: float | None = None
         self.stage_homed: bool | None = None
+        self._stage_updates = 0
         self.start_position_m: float | None = None
         self.pull_start_position_m: float | None = None
         self.return_error_m: float | None = None
@@ -135,13 +139,18 @@ class TrialSequence:
         raise TrialAborted(self.reason)
 
     def _wait(self, ready: Callable[[], bool], what: str, timeout_s: float | None = None):
-        deadline = time.monotonic() + (timeout_s or self.conditions.phase_timeout_s)
+        if not self._wait_for(ready, timeout_s or self.conditions.phase_timeout_s):
+            self._fail(f'timeout: {what} (state {self.state})')
+
+    def _wait_for(self, ready: Callable[[], bool], timeout_s: float) -> bool:
+        """Poll until ready() (True) or timeout_s of wall time (False); raise on abort."""
+        deadline = time.monotonic() + timeout_s
         while True:
             self._check()
             if ready():
-                return
+                return True
             if time.monotonic() > deadline:
-                self._fail(f'timeout: {what} (state {self.state})')
+                return False
             time.sleep(POLL_S)
 
     def _await(self, pending: Pending, what: str):
@@ -174,6 +183,7 @@ class TrialSequence:
                 or abs(position_m - previous) > 1e-6:
             self._last_motion = time.monotonic()
         self.stage_position_m, self.stage_velocity_m_per_s = position_m, velocity_m_per_s
+        self._stage_updates += 1
         start = self.pull_start_position_m
         if start is not None and self.state in ('taking_up_slack', 'pulling') \
                 and abs(position_m - start) > self.conditions.travel_mm * 1e-3:
@@ -232,19 +242,45 @@ class TrialSequence:
         if self.state != 'configuring':
             self._set_state('configuring')
         for node in DEVICE_NODES:
-            label = self._await(self.rig.get_state(node), f'{node} get_state')
+            label = self._device_state(node)
             steps = {'unconfigured': ('configure', 'activate'), 'inactive': ('activate',),
                      'active': ()}.get(label)
             if steps is None:
                 self._fail(f'{node} is {label}, cannot bring it up'
                            + self._device_hint(node))
             for transition in steps:
-                pending = self.rig.change_state(node, transition)
-                self._wait(pending.done, f'{node} {transition}')
-                ok, message = pending.value()
-                if not ok:
-                    self._fail(f'{node} {transition} failed: {message}' + self._device_hint(node))
+                self._transition(node, transition)
         self._active_devices = True
+
+    def _device_state(self, node: str) -> str:
+        """The node's lifecycle state label. A query that goes unanswered is sent again: a
+        reply can be lost while DDS is still matching a node that has just started."""
+        deadline = time.monotonic() + self.conditions.phase_timeout_s
+        while True:
+            pending = self.rig.get_state(node)
+            if self._wait_for(pending.done, min(QUERY_RETRY_S, deadline - time.monotonic())):
+                ok, label = pending.value()
+                if not ok:
+                    self._fail(f'{node} get_state failed: {label}')
+                return label
+            if time.monotonic() >= deadline:
+                self._fail(f'timeout: {node} get_state (state {self.state})')
+
+    def _transition(self, node: str, transition: str) -> None:
+        """Request a lifecycle transition and wait for it; if its answer is slow, ask the node
+        for its state: a transition that took effect counts even if its reply was lost."""
+        goal = TRANSITION_GOALS[transition]
+        pending = self.rig.change_state(node, transition)
+        deadline = time.monotonic() + self.conditions.phase_timeout_s
+        while not self._wait_for(pending.done, min(QUERY_RETRY_S, deadline - time.monotonic())):
+            if time.monotonic() >= deadline:
+                self._fail(f'timeout: {node} {transition} (state {self.state})')
+            state = self.rig.get_state(node)
+            if self._wait_for(state.done, QUERY_RETRY_S) and state.value() == (True, goal):
+                return
+        ok, message = pending.value()
+        if not ok:
+            self._fail(f'{node} {transition} failed: {message}' + self._device_hint(node))
 
     def _device_hint(self, node: str) -> str:
         message = self.device_messages.get(node)
@@ -326,9 +362,12 @@ class TrialSequence:
         self.return_error_m = self._move_to(self.start_position_m, 'return to the start position')
 
     def _finish(self, state: str, result: str, reason: str) -> dict:
+        stage_stopped = None
         if state == 'aborted':
-            self.rig.stop_stage()
+            stage_stopped = self._stop_and_confirm()
         outcome = self._outcome(result, reason)
+        if stage_stopped is not None:
+            outcome['stage_stopped'] = stage_stopped
         self._set_state(state, reason)
         self.outcome = outcome
         try:
@@ -336,6 +375,20 @@ class TrialSequence:
         finally:
             self.finished.set()
         return outcome
+
+    def _stop_and_confirm(self) -> str:
+        """Stop the stage and wait (briefly) for a stage state reporting rest, so that the
+        log shows the stage standing: 'true', or 'unconfirmed' if none came."""
+        self.rig.stop_stage()
+        if self.stage_position_m is None:
+            return 'unconfirmed'
+        seen = self._stage_updates
+        deadline = time.monotonic() + STOP_CONFIRM_S
+        while time.monotonic() < deadline:
+            if self._stage_updates > seen and self._at_rest():
+                return 'true'
+            time.sleep(POLL_S)
+        return 'unconfirmed'
 
     def _outcome(self, result: str, reason: str) -> dict:
         m = self.monitor
