@@ -138,7 +138,8 @@ def _print_text(report):
         f'max spring energy {report["max_spring_energy_mJ"]:.1f} mJ',
         f'arm share of KE at peak {report["arm_ke_share_at_peak"]:.2f}',
         f'contact angle    {report["contact_angle_deg"]:.2f} deg',
-        f'body pivot       ({pivot[0]:.3f}, {pivot[1]:.3f}) mm (camera frame)',
+        f'body pivot       ({pivot[0]:.3f}, {pivot[1]:.3f}) mm (camera frame, x mirrored '
+        'as the authors publish it)',
         f'L1               {report["L1_mm"]:.2f} mm',
     ]
     if 'tendon_work_to_IV_mJ' in report:

@@ -3,10 +3,12 @@
 Model θ1 from the tracked body angle: θ1_model = θ1_cam + offset. The spring zero θ1₀ = π + α
 is defined against the model's x axis (pivot a → guide hole d), which the camera does not see.
 The caller fixes the offset with one of:
-- ``theta1_start_rad``: the model θ1 at the first frame (the rig's set-up angle, 2.4812 rad in
-  the reference parameters), or
 - ``guide_direction_cam_rad``: direction a → d measured in the right-handed camera frame
-  (y flipped from the tracker's), then θ1_model = θ1_cam − guide_direction_cam_rad.
+  (y flipped from the tracker's), then θ1_model = θ1_cam − guide_direction_cam_rad. The
+  analysis default is 0: the camera's x axis runs from the pivot towards the guide, as on the
+  simulated rig and in the authors' published θ1; or
+- ``theta1_start_rad``: the model θ1 at the first frame (a set-up angle, e.g. 2.4812 rad in
+  the simulation's reference parameters).
 """
 from __future__ import annotations
 

@@ -148,6 +148,16 @@ def fixed_point_of_motion(angle_rad: np.ndarray, centroid: np.ndarray,
     return p + origin, q, rms
 
 
+def template_point(point: np.ndarray, angle_rad: np.ndarray, centroid: np.ndarray,
+                   ) -> np.ndarray:
+    """Body-fixed point (template coordinates) that best stays at ``point`` under the poses.
+
+    With poses (θ_k, c_k) from :func:`kabsch_angles`, the body point q is at c_k + R_k q; the
+    least-squares q for a fixed position p is mean_k R_kᵀ (p − c_k).
+    """
+    return rotate(np.asarray(point, float) - centroid, -angle_rad).mean(axis=0)
+
+
 def fit_fixed_pivot(points: np.ndarray, pivot0: np.ndarray, offsets0: np.ndarray,
                     max_iterations: int = 20, tol_mm: float = 1e-6,
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:

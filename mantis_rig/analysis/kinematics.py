@@ -1,18 +1,31 @@
 """Pivots, link length and joint angles from marker tracks; tip speed from joint rates.
 
-Fits are rigid-body fits (see :func:`fit_linkage`): the body pivot a is the point fixed under
-the body's motion, the arm pivot b the point fixed in both the body frame and the arm frame,
-L1 = |a − b|. On the reference trial the rigid fit and a common-centre circle fit agree to
-0.2 mm; both leave ~0.04 mm marker residuals, while the body markers' mutual distances drift
-by ~0.1 mm with the body angle (non-rigidity of the image), which bounds how well any
-estimator can place a along the radius (~0.5 mm).
+θ1 is the body's rotation in the camera and θ3 the arm's rotation relative to the body, each
+measured as rotation about the pivot of its regime (below); the pivots also set the constant
+offsets of θ1 and θ3 and the length L1 (see :func:`fit_linkage`).
+
+**Where the pivots are fitted: on the strike.** The joint has play. On the reference trial the
+body's centre of rotation during the strike (phase IV and the body's rebound) lies 0.5 mm from
+its centre during the seconds of loading, when the tendon loads the pin: one fixed pivot for
+both leaves a systematic residual, and 'rotation about' the loading pivot overstates the strike
+rotation by 3 % (about the strike pivot, the loading rotation is understated by 2.7 %; the
+pivot-free Kabsch angle agrees with the regime-wise rotation in both). The strike is what the
+tip speed, L1 and the phase-IV dynamics are about, so the linkage geometry is fitted on the
+strike frames: from the start of phase IV (the body turns round at maximum spring contraction)
+until the body's rebound has died down below ``STRIKE_SPEED_SHARE`` of its peak angular speed.
+The pivot of the loading frames is kept (``LinkageFit.loading_pivot_mm``) and used for the body
+angle before the strike. When the strike is not resolved (too few frames, too little rotation,
+no strike in the tracks) or does not turn about a significantly different point
+(:func:`pivot_moved`), one pivot is fitted on all frames.
 
 Conventions (those of physics.md, in a right-handed frame):
-- The tracking frame is left-handed (image y down); y is negated once, before any fit.
+- The tracking frame is left-handed (image y down); y is negated once, before any fit. That
+  right-handed frame is the model's frame when the camera's x axis runs from the body pivot
+  towards the tendon guide (the simulated camera's convention, and the authors' θ1).
 - θ1_cam: direction of the body link a→b (body pivot to arm pivot), counter-clockwise from
-  the camera's +x axis. It differs from the model's θ1 by a constant (the direction of the
-  guide hole, the model's x axis), which the caller supplies; see ``energy.model_theta1``.
-  Loading turns the body clockwise (θ1 falls), the strike counter-clockwise.
+  the camera's +x axis. It differs from the model's θ1 by the direction of the guide hole, the
+  model's x axis (see ``energy.model_theta1``). Loading turns the body clockwise (θ1 falls),
+  the strike counter-clockwise.
 - θ3: counter-clockwise angle from the arm axis (b → tip) to the body link (b → a). θ3 = 0 is
   the arm folded onto the body; the arm opens with θ3 rising. The tip is not tracked, so the
   arm axis is taken as b → the arm marker farthest from b, plus an optional fixed offset
@@ -24,9 +37,32 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import stats
 
-from .geometry import fit_fixed_pivot, fixed_point_of_motion, rigid_poses, rotate, signed_angle
+from . import phases as ph
+from .geometry import (
+    fit_fixed_pivot,
+    fixed_point_of_motion,
+    rigid_poses,
+    rotate,
+    rotation_about,
+    rotation_model_rms,
+    signed_angle,
+    template_point,
+)
+from .smoothing import angle_noise_rad, full_window, smooth_angle
 from .tracking import MarkerTracks
+
+# The strike window ends when the body's angular speed has fallen below this share of its peak
+# for good (the rebound has died down). On the reference trial shares of 0.02 .. 0.5 move the
+# body pivot by <= 0.13 mm and L1 by <= 0.12 mm.
+STRIKE_SPEED_SHARE = 0.1
+# Below this the strike is not resolved well enough to fit pivots on: use all frames.
+MIN_STRIKE_FRAMES = 25
+MIN_STRIKE_ROTATION_RAD = 0.1
+# Significance level at which the strike is taken to rotate about another point than the
+# loading (:func:`pivot_moved`).
+PIVOT_SHIFT_P = 1e-3
 
 
 @dataclass
@@ -36,9 +72,14 @@ class LinkageFit:
     body_pivot_mm: np.ndarray        # a, in the camera frame as recorded (x, y)
     arm_pivot_body_mm: np.ndarray    # b − a in the right-handed frame at the first frame
     L1_mm: float
-    body_fit_rms_mm: float           # RMS marker residual of 'body rotates about a'
+    body_fit_rms_mm: float           # RMS marker residual of 'body rotates about a' (fit window)
     arm_fit_rms_mm: float            # same for the arm about b, in the body frame
     angle_noise_floor_rad: float     # quantisation floor for the joint angles
+    fit_window_s: tuple[float, float] = (float('nan'), float('nan'))
+    strike_fit: bool = False         # pivots fitted on the strike (else on all frames)
+    # Body pivot fitted on the frames before the strike (camera frame as recorded), NaN if
+    # there is no strike; its distance from body_pivot_mm shows the joint's play.
+    loading_pivot_mm: np.ndarray | None = None
 
 
 @dataclass
@@ -78,57 +119,164 @@ def _fill_gaps(time_s: np.ndarray, xy: np.ndarray) -> np.ndarray:
     return np.column_stack([np.interp(time_s, time_s[ok], xy[ok, k]) for k in range(2)])
 
 
+def _to_camera(tracks: MarkerTracks, point: np.ndarray) -> np.ndarray:
+    return point * np.array([1.0, -1.0]) if tracks.handedness == 'left' else point
+
+
+def strike_window(time_s: np.ndarray, body_angle_rad: np.ndarray, noise_floor_rad: float,
+                  speed_share: float = STRIKE_SPEED_SHARE) -> slice | None:
+    """Frames of the strike: start of phase IV to the end of the body's rebound.
+
+    The body angle (counter-clockwise, right-handed) is smoothed as in the analysis; phase IV
+    starts where θ̇1 turns positive just before the body's fastest forward motion
+    (:func:`phases.max_contraction`). The window ends once |θ̇1| has stayed below
+    ``speed_share`` of that peak for as long as the body took from the start of IV to its peak
+    (the rebound's swings pass through θ̇1 = 0 too, but briefly). None if there is no such
+    strike, or it is too short or turns too little to fit a pivot on.
+    """
+    sigma = angle_noise_rad(body_angle_rad, noise_floor_rad)
+    _, omega, half = smooth_angle(time_s, body_angle_rad, sigma)
+    dt_s = float(np.median(np.diff(time_s)))
+    i_peak = ph.strike_index(omega, full_window(half))
+    try:
+        t_iv, _ = ph.max_contraction(time_s, omega, sigma / ((2 * half + 1) * dt_s), i_peak)
+    except (ValueError, IndexError):
+        return None
+    i_start = int(np.searchsorted(time_s, t_iv))
+    fast = i_peak + np.nonzero(np.abs(omega[i_peak:]) > speed_share * omega[i_peak])[0]
+    quiet = np.nonzero(np.diff(fast) > max(i_peak - i_start, 1))[0]
+    i_stop = int(fast[quiet[0]] if len(quiet) else fast[-1]) + 1
+    if (i_stop - i_start < MIN_STRIKE_FRAMES
+            or np.ptp(body_angle_rad[i_start:i_stop]) < MIN_STRIKE_ROTATION_RAD):
+        return None
+    return slice(i_start, i_stop)
+
+
+@dataclass
+class _Pivot:
+    point: np.ndarray        # fixed point, in the points' frame
+    offsets: np.ndarray      # markers − point at the reference pose
+    rms: float               # RMS marker residual
+
+
+def _fixed_pivot(points: np.ndarray) -> _Pivot:
+    """ML fixed pivot of a rigid marker set that rotates about it (ValueError if it does not)."""
+    template, angle, centroid = rigid_poses(points, iterations=1)
+    p0, q0, _ = fixed_point_of_motion(angle, centroid)
+    p, offsets, _, rms = fit_fixed_pivot(points, p0, template - q0)
+    return _Pivot(p, offsets, rms)
+
+
+def pivot_moved(points: np.ndarray, own: _Pivot, other: np.ndarray,
+                p_value: float = PIVOT_SHIFT_P) -> bool:
+    """Do these frames rotate about their own fitted pivot rather than ``other``?
+
+    F-test of the nested models 'rigid rotation about ``other``' (offsets and angles free) and
+    'about a free pivot' (2 more unknowns), against the free fit's residual variance.
+    """
+    n, m, _ = points.shape
+    rss_own = own.rms ** 2 * n * m
+    rss_other = rotation_model_rms(points, other) ** 2 * n * m
+    dof = 2 * n * m - (n + 2 * m + 2)
+    if dof <= 0 or rss_own <= 0.0:
+        return False
+    f_stat = 0.5 * (rss_other - rss_own) / (rss_own / dof)
+    return bool(f_stat > stats.f.isf(p_value, 2, dof))
+
+
+def _rotation(points: np.ndarray, pivot: _Pivot, reference: np.ndarray) -> np.ndarray:
+    """Rotation about the pivot in every frame, on the 2π branch and zero of ``reference``."""
+    angle = rotation_about(pivot.point, pivot.point + pivot.offsets, points)
+    return angle + np.median(reference - angle)
+
+
+def _body_fit(body: np.ndarray, time_s: np.ndarray, sigma_xy: float, speed_share: float,
+              ) -> tuple[_Pivot, _Pivot | None, np.ndarray, slice]:
+    """(pivot for the linkage, loading pivot or None, body angle per frame, frames fitted on).
+
+    One fixed pivot on all frames first; its rotation (less noisy than the Kabsch angle)
+    locates the strike. With a resolved strike: the strike pivot, unless the strike frames
+    are explained as well by the pivot of the frames before it (then the all-frames pivot,
+    the better-determined one). The body angle is the rotation about each regime's pivot,
+    joined where the body rests at the end of loading.
+    """
+    _, kabsch, _ = rigid_poses(body, iterations=2)
+    pooled = _fixed_pivot(body)
+    pooled_angle = _rotation(body, pooled, kabsch)
+    floor = sigma_xy / np.sqrt(np.sum(pooled.offsets ** 2))
+    window = strike_window(time_s, pooled_angle, floor, speed_share)
+    if window is None:
+        return pooled, None, pooled_angle, slice(None)
+    strike = _fixed_pivot(body[window])
+    loading = None
+    if window.start >= MIN_STRIKE_FRAMES:
+        try:
+            loading = _fixed_pivot(body[:window.start])
+        except ValueError:                  # the body did not turn before the strike
+            loading = None
+    if loading is not None and not pivot_moved(body[window], strike, loading.point):
+        return pooled, loading, pooled_angle, slice(None)
+    angle = _rotation(body, strike, kabsch)
+    if loading is not None:
+        pre = slice(0, window.start)
+        before = _rotation(body[pre], loading, kabsch[pre])
+        n = min(MIN_STRIKE_FRAMES, window.start)
+        angle[pre] = before + np.mean(angle[window.start - n:window.start] - before[-n:])
+    return strike, loading, angle, window
+
+
 def fit_linkage(tracks: MarkerTracks, arm_axis_offset_rad: float = 0.0,
-                ) -> tuple[LinkageFit, JointAngles]:
+                speed_share: float = STRIKE_SPEED_SHARE) -> tuple[LinkageFit, JointAngles]:
     """Fit the body pivot, the arm pivot and L1; return them with θ1_cam(t) and θ3(t).
 
-    Rigid-body fits, not per-marker circle fits:
-    1. body pose per frame (2-D Kabsch on all body markers against their mean shape);
-    2. body pivot a = the point fixed under that motion (:func:`fixed_point_of_motion`),
-       refined to the maximum-likelihood fit of 'markers rotate rigidly about a fixed a'
-       (:func:`fit_fixed_pivot`), which also gives θ1 as the rotation about a;
-    3. arm markers moved into the body frame; arm pose relative to the body, likewise;
-    4. arm pivot b = the point fixed in both the body frame and the arm frame; L1 = |a − b|.
-    All frames count equally (the fits are maximum likelihood for iid marker noise).
+    1. body pose per frame (2-D Kabsch on all body markers against their mean shape) and one
+       maximum-likelihood fixed pivot for all frames (:func:`geometry.fit_fixed_pivot`,
+       started from :func:`geometry.fixed_point_of_motion`);
+    2. the strike window (:func:`strike_window`) from the rotation about that pivot;
+    3. body pivot a = the same fit on the strike, and the loading pivot on the frames before
+       it; if the strike frames do not rotate about a significantly different point
+       (:func:`pivot_moved`), the all-frames pivot instead;
+    4. body angle = rotation about the pivot of each regime, joined at the end of loading
+       (rotation about the right centre is unbiased and less noisy than the Kabsch angle);
+    5. arm markers in the body frame (body angle, marker centroid); the arm pivot b = the
+       fixed point of the arm's motion relative to the body, on the same frames as a; arm
+       angle = rotation about b;
+    6. L1 = |a − b| in the body frame; θ1_cam = direction of a→b turned with the body;
+       θ3 = angle from the arm axis to b→a, turned by the arm's relative rotation.
     """
     tracks.validate()
     body = _right_handed(tracks, tracks.body_markers)
     arm = _right_handed(tracks, tracks.arm_markers)
+    t = tracks.time_s
 
-    body_tpl, body_kabsch, body_c = rigid_poses(body, iterations=1)
-    a0, a_tpl, _ = fixed_point_of_motion(body_kabsch, body_c)
-    # Refine to the maximum-likelihood pivot; each frame then has one unknown, its rotation
-    # about a, which is less noisy than the 3-DOF Kabsch pose.
-    a, body_vecs, body_rot, body_rms = fit_fixed_pivot(body, a0, body_tpl - a_tpl)
-    body_rot = _refine(body_rot, body_kabsch)
-    # Arm markers in body-template coordinates, origin at a: R_kᵀ (p − a).
-    arm_in_body = rotate(arm - a, -body_rot)
-    arm_tpl, arm_kabsch, arm_c = rigid_poses(arm_in_body, iterations=1)
-    b0, b_arm, _ = fixed_point_of_motion(arm_kabsch, arm_c)
-    b_tpl, arm_vecs, arm_rot, arm_rms = fit_fixed_pivot(arm_in_body, b0, arm_tpl - b_arm)
-    arm_rot = _refine(arm_rot, arm_kabsch)
+    sigma_xy = coordinate_resolution_mm(tracks) / np.sqrt(12.0)
+    a, loading, body_rot, fit_on = _body_fit(body, t, sigma_xy, speed_share)
+    body_c = body.mean(axis=1)
 
-    to_a = -b_tpl                              # b → a in body-template coordinates
-    outer = int(np.argmax(np.linalg.norm(arm_vecs, axis=1)))
-    axis0 = rotate(arm_vecs[outer][None, :], arm_rot[:1])[0]
-    theta3 = signed_angle(axis0, to_a) - (arm_rot - arm_rot[0]) + arm_axis_offset_rad
-    theta1_cam = np.arctan2(-to_a[1], -to_a[0]) + body_rot
+    arm_in_body = rotate(arm - body_c[:, None, :], -body_rot)   # body-template coordinates
+    b = _fixed_pivot(arm_in_body[fit_on])
+    # In the gauge of b.offsets: arm markers ≈ b + R(arm_rot) offsets (body frame).
+    arm_rot = rotation_about(b.point, b.point + b.offsets, arm_in_body)
 
-    resolution = coordinate_resolution_mm(tracks)
-    sigma_xy = resolution / np.sqrt(12.0)
-    floor = (sigma_xy / np.sqrt(np.sum(body_vecs ** 2))
-             + sigma_xy / np.sqrt(np.sum(arm_vecs ** 2)))
+    a_tpl = template_point(a.point, body_rot[fit_on], body_c[fit_on])
+    link = b.point - a_tpl                             # a → b, body-template coordinates
+    outer = int(np.argmax(np.linalg.norm(b.offsets, axis=1)))
+    axis0 = rotate(b.offsets[outer][None, :], arm_rot[:1])[0]    # b → outer marker, frame 0
+    theta1_cam = np.arctan2(link[1], link[0]) + body_rot
+    theta3 = signed_angle(axis0, -link) - (arm_rot - arm_rot[0]) + arm_axis_offset_rad
 
-    pivot_cam = a * np.array([1.0, -1.0]) if tracks.handedness == 'left' else a
-    b_minus_a0 = rotate(-to_a[None, :], body_rot[:1])[0]
-    fit = LinkageFit(pivot_cam, b_minus_a0, float(np.linalg.norm(to_a)), body_rms, arm_rms,
-                     float(floor))
-    return fit, JointAngles(tracks.time_s, theta1_cam, theta3)
-
-
-def _refine(angle_rad: np.ndarray, reference_rad: np.ndarray) -> np.ndarray:
-    """Unwrap ``angle_rad`` onto the branch of ``reference_rad`` (same rotation, other 2π)."""
-    return angle_rad + 2.0 * np.pi * np.round((reference_rad - angle_rad) / (2.0 * np.pi))
+    floor = (sigma_xy / np.sqrt(np.sum(a.offsets ** 2))
+             + sigma_xy / np.sqrt(np.sum(b.offsets ** 2)))
+    fit = LinkageFit(
+        body_pivot_mm=_to_camera(tracks, a.point),
+        arm_pivot_body_mm=rotate(link[None, :], body_rot[:1])[0],
+        L1_mm=float(np.linalg.norm(link)), body_fit_rms_mm=a.rms, arm_fit_rms_mm=b.rms,
+        angle_noise_floor_rad=float(floor),
+        fit_window_s=(float(t[fit_on][0]), float(t[fit_on][-1])),
+        strike_fit=fit_on != slice(None),
+        loading_pivot_mm=(_to_camera(tracks, loading.point) if loading is not None
+                          else np.full(2, np.nan)))
+    return fit, JointAngles(t, theta1_cam, theta3)
 
 
 def tip_speed_mps(L1_mm: float, L3_mm: float, theta3_rad: np.ndarray,

@@ -43,9 +43,14 @@ def _interp_crossing(t: np.ndarray, y: np.ndarray, i: int) -> float:
     return float(t[i] + (t[i + 1] - t[i]) * (-y0) / (y1 - y0))
 
 
-def strike_index(omega1_radps: np.ndarray) -> int:
-    """Sample of the peak body speed: the strike is the body's fastest motion."""
-    return int(np.argmax(omega1_radps))
+def strike_index(omega1_radps: np.ndarray, valid: np.ndarray | None = None) -> int:
+    """Sample of the peak body speed: the strike is the body's fastest motion.
+
+    ``valid``: samples that may hold it (e.g. not the ends, where the rate is noisiest).
+    """
+    if valid is None or not valid.any():
+        return int(np.argmax(omega1_radps))
+    return int(np.argmax(np.where(valid, omega1_radps, -np.inf)))
 
 
 def max_contraction(t: np.ndarray, omega1_radps: np.ndarray, omega1_noise_radps: np.ndarray,

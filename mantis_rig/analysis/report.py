@@ -30,12 +30,23 @@ class AnalysisParams:
     d_t_mm: float = 23.0
     k_s_Nmm_per_rad: float = 47.7
     theta1_rest_rad: float = math.pi + math.radians(50.63)
-    # θ1 mapping for tracked data (see energy.py): one of the two.
-    theta1_start_rad: float | None = 2.4812
-    guide_direction_cam_rad: float | None = None
+    # θ1 mapping for tracked data (see energy.py): the direction of the guide hole from the
+    # body pivot in the right-handed camera frame (y up), or else the model θ1 at the first
+    # frame. Default: the camera's x axis runs towards the guide, as on the simulated rig and
+    # in the authors' published θ1 (it starts at 2.31 rad on the reference trial).
+    guide_direction_cam_rad: float | None = 0.0
+    theta1_start_rad: float | None = None
     # Counter-clockwise angle (right-handed frame) from the b→tip line to the
     # b→outermost-arm-marker line: an arm constant, not visible to the camera.
     arm_axis_offset_rad: float = 0.0
+    # The latched contact angle measured on the rig (shim), if known: θ3 is then offset so its
+    # latched level equals it (the authors' convention: relative θ3 plus a per-trial θ3
+    # initial value), instead of relying on arm_axis_offset_rad.
+    contact_angle_rad: float | None = None
+    # Frame of summary()['body_pivot_mm']: 'x_mirrored' (the tracker's x negated: the frame of
+    # the published reference pivot), 'tracker' (as recorded) or 'right_handed' (y negated
+    # for a left-handed tracker: the analysis and model frame).
+    pivot_frame: str = 'x_mirrored'
     inertia: InertiaParams = field(default_factory=InertiaParams)
     # Smoothing: relative velocity precision and the widest window.
     rel_precision: float = 0.02
@@ -63,6 +74,7 @@ class TrialAnalysis:
     contact_angle_rad: float
     overcentering_trajectory_s: float
     linkage: LinkageFit | None = None
+    body_pivot_mm: np.ndarray | None = None     # in AnalysisParams.pivot_frame
 
     @property
     def arm_ke_share_at_peak(self) -> float:
@@ -73,7 +85,7 @@ class TrialAnalysis:
     def summary(self) -> dict:
         p = self.phases
         strike = slice(p.index_max_contraction, None)
-        pivot = (self.linkage.body_pivot_mm.tolist() if self.linkage is not None
+        pivot = (self.body_pivot_mm.tolist() if self.body_pivot_mm is not None
                  else [float('nan'), float('nan')])
         return {
             'peak_tip_speed_mps': float(self.tip_speed_mps[p.index_peak]),
@@ -98,7 +110,24 @@ def analyze_tracks(tracks: MarkerTracks, params: AnalysisParams | None = None) -
     result = _analyze(angles.time_s, theta1, angles.theta3_rad, linkage.L1_mm, params,
                       linkage.angle_noise_floor_rad)
     result.linkage = linkage
+    result.body_pivot_mm = pivot_in_frame(linkage.body_pivot_mm, tracks.handedness,
+                                          params.pivot_frame)
     return result
+
+
+PIVOT_FRAMES = ('x_mirrored', 'tracker', 'right_handed')
+
+
+def pivot_in_frame(pivot_tracker_mm: np.ndarray, handedness: str, frame: str) -> np.ndarray:
+    """A point given in the tracker's frame, expressed in one of :data:`PIVOT_FRAMES`."""
+    if frame == 'tracker':
+        return np.array(pivot_tracker_mm, float)
+    if frame == 'x_mirrored':
+        return np.array(pivot_tracker_mm, float) * np.array([-1.0, 1.0])
+    if frame == 'right_handed':
+        flip = [1.0, -1.0] if handedness == 'left' else [1.0, 1.0]
+        return np.array(pivot_tracker_mm, float) * np.array(flip)
+    raise ValueError(f'pivot_frame {frame!r}: expected one of {PIVOT_FRAMES}')
 
 
 def analyze_angles(time_s: np.ndarray, theta1_rad: np.ndarray, theta3_rad: np.ndarray,
@@ -118,12 +147,10 @@ def _analyze(t: np.ndarray, theta1_raw: np.ndarray, theta3_raw: np.ndarray, L1_m
     sig3 = angle_noise_rad(theta3_raw, noise_floor_rad)
     th1, w1, h1 = smooth_angle(t, theta1_raw, sig1, params.rel_precision, params.max_window_s)
     th3, w3, h3 = smooth_angle(t, theta3_raw, sig3, params.rel_precision, params.max_window_s)
-    tip = tip_speed_mps(L1_mm, params.L3_mm, th3, w1, w3)
 
     i_strike = ph.strike_index(w1)
     dt_s = float(np.median(np.diff(t)))
     t_iv, i_iv = ph.max_contraction(t, w1, sig1 / ((2 * h1 + 1) * dt_s), i_strike)
-    i_peak = ph.peak_after(tip, i_iv)
     # Level thresholds use the per-frame noise: a marker settling across a quantisation
     # boundary is a real sub-pixel step that averaging does not remove.
     thr1 = ph.LEVEL_SIGMAS * sig1
@@ -132,11 +159,16 @@ def _analyze(t: np.ndarray, theta1_raw: np.ndarray, theta3_raw: np.ndarray, L1_m
     i_load = int(np.searchsorted(t, t_load))
     t_unlatch = ph.unlatch_time(t, th3, thr3, i_load, i_iv)
     i_unlatch = int(np.searchsorted(t, t_unlatch))
+    contact = float(np.median(th3[i_load:i_unlatch + 1]))
+    if params.contact_angle_rad is not None:
+        th3 = th3 + (params.contact_angle_rad - contact)
+        contact = float(params.contact_angle_rad)
+    tip = tip_speed_mps(L1_mm, params.L3_mm, th3, w1, w3)
+    i_peak = ph.peak_after(tip, i_iv)
     residual = ph.overcentering_residual(th1, th3, L1_mm, params.beta_rad, params.d_t_mm)
     t_oc = ph.geometric_overcentering(t, residual, i_unlatch, i_iv + 1)
     t_knee = (ph.trajectory_knee_time(t, th1, th3, i_unlatch, i_iv)
               if i_iv - i_unlatch > 20 else float('nan'))
-    contact = float(np.median(th3[i_load:i_unlatch + 1]))
 
     ke_body, ke_arm = kinetic_energies_mJ(L1_mm, th3, w1, w3, params.inertia)
     work = None

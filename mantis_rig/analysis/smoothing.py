@@ -82,3 +82,11 @@ def smooth_angle(time_s: np.ndarray, angle_rad: np.ndarray, noise_rad: float,
     h = adaptive_half_widths(angle_rad, dt_s, noise_rad, rel_precision, max_window_s)
     smooth = centred_moving_average(angle_rad, h)
     return smooth, centred_moving_average_rate(time_s, angle_rad, h), h
+
+
+def full_window(half_width: np.ndarray) -> np.ndarray:
+    """True where the rate's centred window (:func:`centred_moving_average_rate`) is not cut
+    short by the ends of the series: near the ends the window shrinks and the rate is noisy."""
+    n = len(half_width)
+    idx = np.arange(n)
+    return (idx - 1 - half_width >= 0) & (idx + 1 + half_width <= n - 1)

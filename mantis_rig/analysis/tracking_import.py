@@ -11,7 +11,7 @@ imported trials:
   (rad, smoothed) and their rates (rad/s), as :func:`~mantis_rig.analysis.analyze_tracks`
   derives them (pivot fit from the marker arcs, zero-phase adaptive smoothing);
 * metadata ``trial_conditions`` (source file, format, the file's header block) and
-  ``tracking_fit`` (fitted body pivot and L1).
+  ``tracking_fit`` (fitted body pivot in the tracker's frame as recorded, and L1).
 
 Log times (and JointState stamps) are the file's times shifted so none is negative:
 ``t_log = t - min(0, t_first)``.
@@ -78,6 +78,7 @@ def write_tracking_bag(tracks: MarkerTracks, output, analysis: TrialAnalysis | N
         if analysis is not None and analysis.linkage is not None:
             x, y = (float(v) for v in analysis.linkage.body_pivot_mm)
             bag.add_metadata(FIT_RECORD, {'body_pivot_x_mm': repr(x), 'body_pivot_y_mm': repr(y),
+                                          'body_pivot_frame': 'tracker',
                                           'L1_mm': repr(analysis.L1_mm),
                                           'angles_topic': ANGLES_TOPIC})
         for start in range(0, tracks.n_frames, frames_per_block):
