@@ -5,9 +5,12 @@
 
 Three processes on one local ROS domain, each measured on its own from /proc/<pid>/stat:
 
-* the source: ``sim`` = sim_world_node + loadcell_node (the DAQ node, simulated backend,
-  configured and activated here through its lifecycle services); ``synthetic`` = a bare
-  publisher of force blocks standing in for the DAQ node;
+* the source: ``ni`` (default) = loadcell_node, the DAQ node as it runs on the rig (backend
+  ``hardware``, the NI-DAQmx code path), over the test suite's fake of nidaqmx
+  (test/fakes_nidaq) paced to deliver samples no faster than the wall clock, as the USB-6363
+  does; ``sim`` = sim_world_node + loadcell_node with the simulated backend; ``synthetic`` = a
+  bare publisher of force blocks standing in for the DAQ node. The DAQ node is configured and
+  activated here through its lifecycle services.
   With ``sim`` the DAQ node's share includes receiving the world's 20 kS/s truth over /sim/*,
   and the stream runs on simulated time (it slips when the world falls behind);
   ``synthetic`` paces 20 kS/s on the wall clock.
@@ -78,6 +81,37 @@ def make_executor(name: str):
     if name == 'single':
         return SingleThreadedExecutor()
     return MultiThreadedExecutor(num_threads=2)
+
+
+def role_ni_daq(args) -> int:
+    """loadcell_node with the hardware backend over a fake USB-6363 that keeps real time."""
+    sys.path.insert(0, str(REPO / 'test'))
+    from fakes_nidaq import FakeDaqSystem
+    import numpy as np
+
+    class PacedDaq(FakeDaqSystem):
+        """Samples exist only once the wall clock has reached them (the real DAQ's pace)."""
+
+        started = None
+
+        def volts(self, task, samples):
+            rate = task.timing.samp_clk_rate
+            if self.started is None:
+                self.started = time.monotonic() - self.position / rate
+            delay = self.started + (self.position + samples) / rate - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            return super().volts(task, samples)
+
+    system = PacedDaq(signal_v=lambda index: 0.9 + 0.001 * np.sin(index * 1e-3))
+    sys.modules.update(system.modules())
+    from mantis_rig.nodes.device_node import run_node
+    from mantis_rig.nodes.loadcell_node import LoadcellNode
+    run_node(LoadcellNode, args=[sys.argv[0], '--ros-args', '-p', 'backend:=hardware',
+                                 '-p', f'sample_rate_hz:={args.rate}',
+                                 *(['-p', f'block_size:={args.block_size}']
+                                   if args.block_size else [])])
+    return 0
 
 
 def role_synthetic(args) -> int:
@@ -157,13 +191,14 @@ def main(argv=None) -> int:
     parser.add_argument('--rate', type=float, default=20_000.0, help='samples/s')
     parser.add_argument('--block-size', type=int, default=None,
                         help='samples per force block (default: the DAQ node\'s; synthetic 1000)')
-    parser.add_argument('--source', choices=('sim', 'synthetic'), default='sim')
+    parser.add_argument('--source', choices=('ni', 'sim', 'synthetic'), default='ni')
     parser.add_argument('--scene', default='air_23mm_rig',
                         help='sim source: the world\'s scene (default air_23mm_rig, the cheapest)')
     parser.add_argument('--executor', choices=('multi', 'single', 'events'), default='single',
                         help='the recorder process\'s executor (default single, as in the '
                         'supervisor)')
-    parser.add_argument('--role', choices=('driver', 'recorder', 'synthetic'), default='driver',
+    parser.add_argument('--role', choices=('driver', 'recorder', 'synthetic', 'ni_daq'),
+                        default='driver',
                         help=argparse.SUPPRESS)
     parser.add_argument('--bag', help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -171,6 +206,8 @@ def main(argv=None) -> int:
     claim_local_domain()
     if args.role == 'recorder':
         return role_recorder(args)
+    if args.role == 'ni_daq':
+        return role_ni_daq(args)
     if args.role == 'synthetic':
         args.block_size = args.block_size or 1000
         return role_synthetic(args)
@@ -197,6 +234,11 @@ def main(argv=None) -> int:
             processes['daq'] = spawn([sys.executable, '-m', 'mantis_rig.nodes.loadcell_node',
                                       *ros, '-p', f'scene:={args.scene}'], logs['daq'])
             lifecycle('loadcell_node', (1, 3))           # configure, activate
+        elif args.source == 'ni':
+            block = ['--block-size', str(args.block_size)] if args.block_size else []
+            processes['daq'] = spawn(me + ['--role', 'ni_daq', '--rate', str(args.rate),
+                                           *block], logs['daq'])
+            lifecycle('loadcell_node', (1, 3))
         else:
             block = ['--block-size', str(args.block_size)] if args.block_size else []
             processes['daq'] = spawn(me + ['--role', 'synthetic', '--rate', str(args.rate),
@@ -236,7 +278,10 @@ def main(argv=None) -> int:
     total = share['daq'] + share['recorder']
     print(f'DAQ node + recorder: {total:.3f} core (goal < 0.5: '
           f'{"met" if total < 0.5 else "NOT met"})')
-    loss_free = not monitor.gaps and abs(monitor.samples - expected) < 1.5
+    # the stream must also have lasted the whole window: a source that died early loses
+    # everything after it, gap-free or not
+    loss_free = (not monitor.gaps and abs(monitor.samples - expected) < 1.5
+                 and monitor.duration_s >= wall)
     print(f'zero loss: {"yes" if loss_free else "NO"}')
     return 0 if loss_free else 1
 
