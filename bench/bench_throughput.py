@@ -105,13 +105,12 @@ def role_ni_daq(args) -> int:
 
     system = PacedDaq(signal_v=lambda index: 0.9 + 0.001 * np.sin(index * 1e-3))
     sys.modules.update(system.modules())
-    from mantis_rig.nodes.device_node import run_node
+    from mantis_rig.nodes.executors import run_node
     from mantis_rig.nodes.loadcell_node import LoadcellNode
-    run_node(LoadcellNode, args=[sys.argv[0], '--ros-args', '-p', 'backend:=hardware',
+    return run_node(LoadcellNode, args=[sys.argv[0], '--ros-args', '-p', 'backend:=hardware',
                                  '-p', f'sample_rate_hz:={args.rate}',
                                  *(['-p', f'block_size:={args.block_size}']
                                    if args.block_size else [])])
-    return 0
 
 
 def role_synthetic(args) -> int:

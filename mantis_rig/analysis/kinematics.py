@@ -85,8 +85,11 @@ class LinkageFit:
 @dataclass
 class JointAngles:
     time_s: np.ndarray
-    theta1_cam_rad: np.ndarray
-    theta3_rad: np.ndarray
+    theta1_cam_rad: np.ndarray      # direction a → b from the camera's x axis (right-handed)
+    theta3_rad: np.ndarray          # arm axis to the line b → a
+    # The body's rigid rotation, on θ1_cam's zero at the first frame: equal to θ1_cam
+    # without joint play, and in the strike (the body turns about a) up to a constant.
+    body_angle_rad: np.ndarray | None = None
 
 
 def coordinate_resolution_mm(tracks: MarkerTracks) -> float:
@@ -262,8 +265,16 @@ def fit_linkage(tracks: MarkerTracks, arm_axis_offset_rad: float = 0.0,
     link = b.point - a_tpl                             # a → b, body-template coordinates
     outer = int(np.argmax(np.linalg.norm(b.offsets, axis=1)))
     axis0 = rotate(b.offsets[outer][None, :], arm_rot[:1])[0]    # b → outer marker, frame 0
-    theta1_cam = np.arctan2(link[1], link[0]) + body_rot
-    theta3 = signed_angle(axis0, -link) - (arm_rot - arm_rot[0]) + arm_axis_offset_rad
+    body_angle = np.arctan2(link[1], link[0]) + body_rot      # the link turned with the body
+    # b in the camera in every frame; θ1_cam is the direction a → b seen from the fixed a. With
+    # joint play this is not the body's rotation (b turns about the loading pivot, a is the
+    # strike's): it is the link angle physics.md's θ1 is, and it places b where the tendon
+    # geometry needs it. θ3 is measured from the arm axis to that same line (b → a).
+    a_to_b = body_c + rotate(np.broadcast_to(b.point, body_c.shape), body_rot) - a.point
+    theta1_cam = body_angle[0] + np.unwrap(
+        signed_angle(np.array([np.cos(body_angle[0]), np.sin(body_angle[0])]), a_to_b))
+    theta3 = (signed_angle(axis0, -link) - (arm_rot - arm_rot[0]) + arm_axis_offset_rad
+              + theta1_cam - body_angle)
 
     floor = (sigma_xy / np.sqrt(np.sum(a.offsets ** 2))
              + sigma_xy / np.sqrt(np.sum(b.offsets ** 2)))
@@ -276,7 +287,7 @@ def fit_linkage(tracks: MarkerTracks, arm_axis_offset_rad: float = 0.0,
         strike_fit=fit_on != slice(None),
         loading_pivot_mm=(_to_camera(tracks, loading.point) if loading is not None
                           else np.full(2, np.nan)))
-    return fit, JointAngles(t, theta1_cam, theta3)
+    return fit, JointAngles(t, theta1_cam, theta3, body_angle)
 
 
 def tip_speed_mps(L1_mm: float, L3_mm: float, theta3_rad: np.ndarray,

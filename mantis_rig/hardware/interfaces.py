@@ -7,11 +7,22 @@ managers: leaving the `with` block releases the device even after an error.
 from __future__ import annotations
 
 import abc
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields, replace
+import logging
 import math
-from typing import Optional
+import threading
+import time
+from typing import Optional, Union
 
 import numpy as np
+
+log = logging.getLogger(__name__)
+
+# The rig's hardware envelope (shared/docs/rig.md): no configuration may go beyond it.
+STAGE_TRAVEL_M = 25e-3                 # MTS25/M-Z8 travel, 0 at the home (reverse) end
+STAGE_MAX_SPEED_M_PER_S = 2.4e-3       # MTS25/M-Z8 maximum speed
+LOADCELL_CAPACITY_N = 111.0            # Futek LSB302, 25 lb
 
 
 class DeviceError(RuntimeError):
@@ -74,6 +85,35 @@ class StageLimits:
     max_position_m: float = 24.5e-3
     max_speed_m_per_s: float = 2.4e-3
     max_acceleration_m_per_s2: float = 4.0e-3
+
+    def __post_init__(self):
+        """Refuse an envelope that is not inside the stage's travel and speed."""
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not math.isfinite(value):
+                raise ConfigurationError(f'stage limit {f.name} {value!r} must be a finite number')
+        travel_mm = STAGE_TRAVEL_M * 1e3
+        if self.min_position_m < 0.0:
+            raise ConfigurationError(
+                f'soft travel limit min_position_m {self.min_position_m * 1e3:g} mm is outside '
+                f'the stage travel [0, {travel_mm:g}] mm')
+        if self.max_position_m > STAGE_TRAVEL_M:
+            raise ConfigurationError(
+                f'soft travel limit max_position_m {self.max_position_m * 1e3:g} mm is outside '
+                f'the stage travel [0, {travel_mm:g}] mm')
+        if not self.min_position_m < self.max_position_m:
+            raise ConfigurationError(
+                f'soft travel limits are empty: min_position_m {self.min_position_m * 1e3:g} mm '
+                f'must be below max_position_m {self.max_position_m * 1e3:g} mm')
+        if not 0.0 < self.max_speed_m_per_s <= STAGE_MAX_SPEED_M_PER_S:
+            raise ConfigurationError(
+                f'speed ceiling max_speed_m_per_s {self.max_speed_m_per_s * 1e3:g} mm/s must be '
+                f'> 0 and at most the stage maximum {STAGE_MAX_SPEED_M_PER_S * 1e3:g} mm/s')
+        if not self.max_acceleration_m_per_s2 > 0.0:
+            raise ConfigurationError(
+                f'max_acceleration_m_per_s2 {self.max_acceleration_m_per_s2 * 1e3:g} mm/s² '
+                f'must be > 0 mm/s²')
 
     def check_position(self, position_m: float) -> None:
         if not (self.min_position_m <= position_m <= self.max_position_m):
@@ -219,3 +259,266 @@ class CameraTrigger(Device):
     def marker_frames(self) -> Optional[MarkerFrames]:
         """Marker tracks of the recorded window where the backend has them (simulation)."""
         return None
+
+
+# --- safety: the force ceiling at the stage -------------------------------------------------
+
+ForceReading = Union[float, np.ndarray, ForceBlock]
+
+
+class StageGuard(Stage):
+    """A Stage that stops the wrapped stage when the tendon force passes a ceiling.
+
+    The stage driver cannot see the force, so the force reaches it here: whoever reads the
+    load cell calls `observe_force()` with every reading (a ForceBlock in the process that owns
+    the DAQ, the samples of each /loadcell/force_block message in the stage's process). A
+    sample above `force_ceiling_n` (or a non-finite one) stops the stage at once and latches a
+    trip: moves in the pull direction (`pull_direction`, +1: increasing position pulls) are
+    then refused with SafetyLimitError until `clear_force_trip()`, which itself is refused
+    while the latest reading is above the ceiling. Stop, home and moves that slacken the tendon
+    stay allowed, so the stage can be returned. A move_to cut short by the trip raises
+    SafetyLimitError.
+
+    Blind pulls: with `max_force_age_s` (default 0.5 s) a pull needs a reading younger than
+    that to start, and a watchdog thread (while open) stops a pull in progress, with a trip,
+    when the readings stop coming: a dead load-cell reader must not leave the stage pulling.
+    The watchdog also repeats the stop if a pull command raced a trip. `max_force_age_s=None`
+    turns the freshness rule off (the ceiling then holds only while readings arrive).
+    """
+
+    def __init__(self, stage: Stage, force_ceiling_n: float, *, pull_direction: int = 1,
+                 max_force_age_s: Optional[float] = 0.5,
+                 clock_s: Callable[[], float] = time.monotonic,
+                 watchdog_period_s: float = 0.02):
+        if not (isinstance(force_ceiling_n, (int, float)) and 0.0 < force_ceiling_n
+                <= LOADCELL_CAPACITY_N):
+            raise ConfigurationError(
+                f'force ceiling {force_ceiling_n!r} N must be > 0 N and at most the load cell '
+                f'capacity {LOADCELL_CAPACITY_N:g} N')
+        if pull_direction not in (1, -1):
+            raise ConfigurationError(f'pull direction {pull_direction!r} must be +1 or -1')
+        if max_force_age_s is not None and not (max_force_age_s > 0
+                                                and math.isfinite(max_force_age_s)):
+            raise ConfigurationError(
+                f'max_force_age_s {max_force_age_s!r} s must be finite and > 0 s (or None)')
+        if not watchdog_period_s > 0:
+            raise ConfigurationError(f'watchdog period {watchdog_period_s!r} s must be > 0 s')
+        self.stage = stage
+        self.force_ceiling_n = float(force_ceiling_n)
+        self.pull_direction = pull_direction
+        self.max_force_age_s = max_force_age_s
+        self._clock_s = clock_s
+        self._watchdog_period_s = watchdog_period_s
+        self._lock = threading.Lock()
+        self._trip: Optional[SafetyLimitError] = None
+        self._trips = 0                  # trips so far: a move compares it before and after
+        self._restopped = False          # the watchdog repeated the stop for the current trip
+        self._pull_active = False        # a pull was admitted and has not ended
+        self._last_force_n: Optional[float] = None
+        self._last_force_time_s: Optional[float] = None
+        self._watchdog: Optional[threading.Thread] = None
+        self._stop_watchdog = threading.Event()
+
+    @property
+    def limits(self) -> StageLimits:
+        return self.stage.limits
+
+    @property
+    def tripped(self) -> Optional[SafetyLimitError]:
+        """The latched trip, or None."""
+        with self._lock:
+            return self._trip
+
+    # --- life cycle -------------------------------------------------------------------------
+
+    def open(self) -> None:
+        self.stage.open()
+        if self._watchdog is None:
+            self._stop_watchdog.clear()
+            self._watchdog = threading.Thread(target=self._watch, daemon=True,
+                                              name='stage-guard watchdog')
+            self._watchdog.start()
+
+    def close(self) -> None:
+        self._stop_watchdog.set()
+        watchdog, self._watchdog = self._watchdog, None
+        if watchdog is not None and watchdog is not threading.current_thread():
+            watchdog.join(timeout=5.0)
+            if watchdog.is_alive():
+                log.error('stage guard watchdog did not stop')
+        with self._lock:
+            self._pull_active = False
+        self.stage.close()
+
+    # --- the force path -----------------------------------------------------------------------
+
+    def observe_force(self, force: ForceReading) -> Optional[SafetyLimitError]:
+        """Take force readings (N): a number, an array of samples or a ForceBlock. Returns the
+        SafetyLimitError if this reading tripped the ceiling (the stage is then stopped)."""
+        samples = np.asarray(force.force_n if isinstance(force, ForceBlock) else force,
+                             dtype=np.float64).ravel()
+        if samples.size == 0:
+            return None
+        finite = np.isfinite(samples)
+        if not finite.all():
+            bad = float(samples[~finite][0])
+            reason = (f'non-finite force reading {bad} N: the force ceiling '
+                      f'{self.force_ceiling_n:g} N cannot be checked')
+            peak = math.inf
+        else:
+            peak = float(samples.max())
+            reason = (f'force {peak:.3f} N above the ceiling {self.force_ceiling_n:g} N')
+        with self._lock:
+            self._last_force_n = peak
+            self._last_force_time_s = self._clock_s()
+        if peak > self.force_ceiling_n:
+            return self._trip_now(reason)
+        return None
+
+    def clear_force_trip(self) -> None:
+        """Re-allow pulls after a trip; refused while the latest reading is above the ceiling."""
+        with self._lock:
+            last = self._last_force_n
+            if self._trip is not None and last is not None and last > self.force_ceiling_n:
+                raise SafetyLimitError(
+                    f'force trip not cleared: the latest force {last:.3f} N is still above the '
+                    f'ceiling {self.force_ceiling_n:g} N')
+            self._trip = None
+            self._restopped = False
+
+    def _trip_now(self, reason: str) -> Optional[SafetyLimitError]:
+        with self._lock:
+            first = self._trip is None
+            if first:
+                self._trip = SafetyLimitError(f'{reason}; stage stopped')
+                self._trips += 1
+                self._restopped = False
+            trip = self._trip
+        try:
+            self.stage.stop()
+        except DeviceError as exc:   # nothing more can be done here: say so loudly
+            log.error('stage guard: stopping the stage after "%s" failed: %s', reason, exc)
+        if first:
+            log.error('stage guard: %s', trip)
+        return trip if first else None
+
+    def _fresh_force_problem(self) -> Optional[str]:
+        """Called with the lock held: why the force readings are too old to pull, or None."""
+        if self.max_force_age_s is None:
+            return None
+        if self._last_force_time_s is None:
+            return (f'no force reading yet: the force ceiling {self.force_ceiling_n:g} N '
+                    f'cannot be enforced')
+        age_s = self._clock_s() - self._last_force_time_s
+        if age_s > self.max_force_age_s:
+            return (f'no force reading for {age_s:.2f} s (limit {self.max_force_age_s:g} s): '
+                    f'the force ceiling {self.force_ceiling_n:g} N cannot be enforced')
+        return None
+
+    def _admit_pull(self, what: str) -> int:
+        """Refuse a pull while tripped or blind; mark it active; return the trip count."""
+        with self._lock:
+            if self._trip is not None:
+                raise SafetyLimitError(f'{what} refused: {self._trip} (clear_force_trip() '
+                                       f'once the force is below the ceiling)')
+            problem = self._fresh_force_problem()
+            if problem is not None:
+                raise SafetyLimitError(f'{what} refused: {problem}')
+            self._pull_active = True
+            return self._trips
+
+    def _after_pull(self, trips_before: int, keep_active: bool) -> None:
+        """After a pull command: if a trip happened meanwhile, stop (again) and raise."""
+        with self._lock:
+            trip = self._trip if self._trips != trips_before else None
+            if trip is not None or not keep_active:
+                self._pull_active = False
+        if trip is not None:
+            try:
+                self.stage.stop()
+            except DeviceError as exc:
+                log.error('stage guard: repeated stop failed: %s', exc)
+            raise SafetyLimitError(str(trip))
+
+    def _watch(self) -> None:
+        while not self._stop_watchdog.wait(self._watchdog_period_s):
+            with self._lock:
+                active = self._pull_active
+                restop = active and self._trip is not None and not self._restopped
+                if restop:
+                    self._restopped = True
+                stale = (active and self._trip is None
+                         and self._fresh_force_problem())
+            try:
+                if restop:
+                    self.stage.stop()
+                elif stale:
+                    if self.stage.state().moving:
+                        self._trip_now(stale)
+                    else:
+                        with self._lock:
+                            self._pull_active = False
+            except DeviceError as exc:   # the driver failed and closed itself: nothing to stop
+                log.error('stage guard watchdog: %s', exc)
+                with self._lock:
+                    self._pull_active = False
+
+    # --- Stage --------------------------------------------------------------------------------
+
+    def identify(self) -> StageInfo:
+        return self.stage.identify()
+
+    def home(self, timeout_s: float = 60.0) -> None:
+        if self.pull_direction > 0:        # homing runs to the reverse end: it slackens
+            self.stage.home(timeout_s)
+            return
+        trips = self._admit_pull('homing')
+        try:
+            self.stage.home(timeout_s)
+        finally:
+            self._after_pull(trips, keep_active=False)
+
+    def move_to(self, position_m: float, speed_m_per_s: float, timeout_s: float = 60.0) -> None:
+        self.limits.check_position(position_m)
+        self.limits.check_speed(speed_m_per_s)
+        here_m = self.stage.state().position_m
+        if (position_m - here_m) * self.pull_direction <= 0:
+            self._end_pull()
+            self.stage.move_to(position_m, speed_m_per_s, timeout_s)
+            return
+        trips = self._admit_pull(f'move to {position_m * 1e3:.4f} mm')
+        try:
+            self.stage.move_to(position_m, speed_m_per_s, timeout_s)
+        except DeviceError:
+            self._after_pull(trips, keep_active=False)   # a trip's SafetyLimitError wins
+            raise
+        self._after_pull(trips, keep_active=False)
+
+    def move_at(self, velocity_m_per_s: float) -> None:
+        self.limits.check_speed(velocity_m_per_s)
+        if velocity_m_per_s * self.pull_direction <= 0:
+            self._end_pull()
+            self.stage.move_at(velocity_m_per_s)
+            return
+        trips = self._admit_pull(f'velocity move at {velocity_m_per_s * 1e3:+.4f} mm/s')
+        try:
+            self.stage.move_at(velocity_m_per_s)
+        except DeviceError:
+            self._after_pull(trips, keep_active=False)
+            raise
+        self._after_pull(trips, keep_active=True)
+
+    def stop(self) -> None:
+        self._end_pull()
+        self.stage.stop()
+
+    def _end_pull(self) -> None:
+        with self._lock:
+            self._pull_active = False
+
+    def state(self) -> StageState:
+        state = self.stage.state()
+        trip = self.tripped
+        if trip is None:
+            return state
+        return replace(state, fault='; '.join(filter(None, [state.fault, str(trip)])))

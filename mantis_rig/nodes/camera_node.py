@@ -10,6 +10,7 @@ world's clock), so the executor never blocks on it.
 """
 from __future__ import annotations
 
+import sys
 import threading
 
 from sensor_msgs.msg import TimeReference
@@ -19,7 +20,8 @@ from std_srvs.srv import Trigger
 from mantis_rig.hardware import backends
 from mantis_rig.hardware.interfaces import CameraConfig, ConfigurationError, DeviceError
 from mantis_rig.hardware.nidaq import parse_trigger_output
-from mantis_rig.nodes.device_node import DeviceNode, Param, run_node, time_msg
+from mantis_rig.nodes.device_node import DeviceNode, Param, time_msg
+from mantis_rig.nodes.executors import run_node
 from mantis_rig.recording.marker_block import MarkerFrames, marker_blocks_to_msgs
 
 FRAMES_TIMEOUT_S = 60.0
@@ -147,9 +149,9 @@ def _answer(response, success: bool, message: str):
     return response
 
 
-def main(args=None):
-    run_node(CameraNode, args)
+def main(args=None) -> int:
+    return run_node(CameraNode, args)
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

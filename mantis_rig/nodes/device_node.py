@@ -15,13 +15,12 @@ check refuses bad values that a range cannot express, and changes to a parameter
 at configure while the device is configured, each with the reason.
 
 Services that block (homing, tare) and the simulated backends (which wait for messages from
-sim_world_node) need a MultiThreadedExecutor: `run_node` spins one.
+sim_world_node) need a MultiThreadedExecutor: `executors.run_node` spins one.
 """
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-import signal
 import threading
 import time
 from typing import Optional
@@ -34,20 +33,16 @@ from rcl_interfaces.msg import (
     ParameterDescriptor,
     SetParametersResult,
 )
-import rclpy
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterUninitializedException
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.lifecycle import Node as LifecycleNode
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.parameter import Parameter
-from rclpy.signals import SignalHandlerOptions
 
 from mantis_rig.hardware.backends import BACKENDS, check_backend
 from mantis_rig.hardware.interfaces import DeviceError
 from mantis_rig.nodes.ros_world_port import RosWorldPort
-from mantis_rig.ros_env import claim_local_domain
 
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 DEFAULT_SCENE = 'air_23mm_rig'
@@ -336,31 +331,3 @@ class DeviceNode(LifecycleNode):
                 except ValueError as exc:
                     return SetParametersResult(successful=False, reason=f'{param.name}: {exc}')
         return SetParametersResult(successful=True)
-
-
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt
-
-
-def run_node(node_class, args=None, num_threads: int = 4) -> None:
-    """main() of a node: local DDS, init, spin in a MultiThreadedExecutor, clean up.
-
-    SIGINT and SIGTERM end the spin here rather than in rclpy's handler, which would shut the
-    context down first: the node still stops its device (a simulated stage's stop is a
-    message) before the context goes."""
-    claim_local_domain()
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    signal.signal(signal.SIGINT, _interrupt)
-    signal.signal(signal.SIGTERM, _interrupt)
-    node = None
-    try:
-        node = node_class()
-        executor = MultiThreadedExecutor(num_threads=num_threads)
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()

@@ -1,4 +1,5 @@
-"""Executors: a single-threaded one where callbacks never block, threads where they do.
+"""Executors: a single-threaded one where callbacks never block, threads where they do; and
+run_node, the main() of every node process.
 
 rclpy's MultiThreadedExecutor costs about 2 ms of CPU per callback, the SingleThreadedExecutor
 well under half of that (bench/bench_throughput.py --executor). Nodes whose callbacks only
@@ -10,7 +11,18 @@ deadlocks against its spin(): the supervisor publishes from its trial thread.)
 """
 from __future__ import annotations
 
-from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+import signal
+import sys
+
+import rclpy
+from rclpy.exceptions import InvalidParameterValueException
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
+
+from mantis_rig.ros_env import claim_local_domain
+
+USAGE_ERROR = 2
+NODE_THREADS = 4        # a device node process: its blocking services and backend waits
 
 
 def light_executor(context=None):
@@ -20,3 +32,39 @@ def light_executor(context=None):
 
 def threaded_executor(num_threads: int = 8, context=None):
     return MultiThreadedExecutor(num_threads=num_threads, context=context)
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def run_node(node_class, args=None, make_executor=None) -> int:
+    """main() of a node process: local DDS, init, spin, clean up; the exit status.
+
+    `make_executor`: a factory called after init; default a MultiThreadedExecutor (the device
+    nodes' services block). A node
+    whose parameters are refused at construction exits 2 with the reason. SIGINT and SIGTERM
+    end the spin here rather than in rclpy's handler, which would shut the context down first:
+    the node still stops its device (a simulated stage's stop is a message) and the supervisor
+    closes its log before the context goes."""
+    claim_local_domain()
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, _interrupt)
+    signal.signal(signal.SIGTERM, _interrupt)
+    node = None
+    try:
+        try:
+            node = node_class()
+        except (ValueError, InvalidParameterValueException) as exc:
+            print(f'{node_class.__name__}: {exc}', file=sys.stderr)
+            return USAGE_ERROR
+        executor = make_executor() if make_executor else threaded_executor(NODE_THREADS)
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0

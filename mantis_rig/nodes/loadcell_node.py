@@ -11,6 +11,7 @@ hardware DAQ cannot tare while acquiring, so there the stream pauses for the tar
 """
 from __future__ import annotations
 
+import sys
 import threading
 
 from geometry_msgs.msg import WrenchStamped
@@ -21,7 +22,8 @@ from std_srvs.srv import Trigger
 from mantis_rig.hardware import backends
 from mantis_rig.hardware.interfaces import DaqConfig, DeviceError
 from mantis_rig.hardware.nidaq import parse_ai_channel
-from mantis_rig.nodes.device_node import ERROR, WARN, DeviceNode, Param, run_node, time_msg
+from mantis_rig.nodes.device_node import ERROR, WARN, DeviceNode, Param, time_msg
+from mantis_rig.nodes.executors import run_node
 from mantis_rig.recording.force_block import force_block_to_msg
 
 LOADCELL_CAPACITY_N = 111.0
@@ -208,9 +210,9 @@ class LoadcellNode(DeviceNode):
         return response
 
 
-def main(args=None):
-    run_node(LoadcellNode, args)
+def main(args=None) -> int:
+    return run_node(LoadcellNode, args)
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections import deque
 import math
+import sys
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
@@ -27,7 +28,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from mantis_rig.hardware.local_world import WorldRunner
-from mantis_rig.nodes.device_node import Param, declare, param_value, run_node, time_msg
+from mantis_rig.nodes.device_node import Param, declare, param_value, time_msg
+from mantis_rig.nodes.executors import run_node
 from mantis_rig.nodes.ros_world_port import (
     CAMERA_FRAMES_TOPIC,
     CAMERA_REQUEST_TOPIC,
@@ -219,9 +221,9 @@ class _StepRunner(WorldRunner):
             raise
 
 
-def main(args=None):
-    run_node(SimWorldNode, args)
+def main(args=None) -> int:
+    return run_node(SimWorldNode, args)
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -12,6 +12,7 @@ stage is open.
 from __future__ import annotations
 
 import math
+import sys
 import threading
 
 from sensor_msgs.msg import JointState
@@ -21,7 +22,8 @@ from std_srvs.srv import Trigger
 from mantis_rig.hardware import backends
 from mantis_rig.hardware.apt_units import Z8_COUNTS_PER_MM
 from mantis_rig.hardware.interfaces import ConfigurationError, DeviceError, StageLimits
-from mantis_rig.nodes.device_node import OK, WARN, DeviceNode, Param, run_node
+from mantis_rig.nodes.device_node import OK, WARN, DeviceNode, Param
+from mantis_rig.nodes.executors import run_node
 
 HOME_TIMEOUT_S = 120.0
 MOVE_TIMEOUT_S = 120.0
@@ -218,9 +220,9 @@ def _flag(value: bool) -> str:
     return 'true' if value else 'false'
 
 
-def main(args=None):
-    run_node(StageNode, args)
+def main(args=None) -> int:
+    return run_node(StageNode, args)
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -16,11 +16,8 @@ import threading
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from lifecycle_msgs.msg import State, TransitionEvent
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
-import rclpy
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.clock import Clock, ClockType
-from rclpy.exceptions import InvalidParameterValueException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState, TimeReference
@@ -30,9 +27,8 @@ from std_srvs.srv import Trigger
 from mantis_rig.recording import TRIAL_CONDITIONS, BagWriter
 from mantis_rig.recording.force_block import force_block_from_msg
 from mantis_rig.recording.marker_block import marker_block_from_msg
-from mantis_rig.ros_env import claim_local_domain
 
-from .executors import light_executor
+from .executors import light_executor, run_node
 from .recorder import LATCHED, RELIABLE, Recorder
 from .rig_client import RigClient
 from .trial_conditions import PARAMETERS, ConditionError, TrialConditions, check_value
@@ -265,6 +261,10 @@ class SupervisorNode(Node):
             self.sequence.on_device_fault(device, f'left the active state (now '
                                                   f'{msg.goal_state.label})')
 
+    def destroy_node(self):
+        self.shutdown_trial()
+        super().destroy_node()
+
     def shutdown_trial(self, reason: str = 'supervisor shutting down') -> None:
         """Abort a running trial and wait (briefly) for its log to close."""
         sequence = self.sequence
@@ -274,27 +274,7 @@ class SupervisorNode(Node):
 
 
 def main(args=None) -> int:
-    claim_local_domain()
-    rclpy.init(args=args if args is not None else sys.argv)
-    node = None
-    try:
-        try:
-            node = SupervisorNode()
-        except (ConditionError, ValueError, InvalidParameterValueException) as exc:
-            print(f'supervisor_node: {exc}', file=sys.stderr)
-            return 2
-        executor = light_executor()     # no callback of the supervisor blocks
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.shutdown_trial()
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return 0
+    return run_node(SupervisorNode, args, light_executor)   # no supervisor callback blocks
 
 
 if __name__ == '__main__':
