@@ -1,4 +1,5 @@
 """The real KDC101 stage backend against an emulated KDC101 on a pseudo-terminal."""
+import os
 import re
 import threading
 import time
@@ -9,8 +10,10 @@ from fakes.kdc101_emulator import (
     MOT_MOVE_ABSOLUTE,
     MOT_MOVE_HOME,
     MOT_MOVE_VELOCITY,
+    MOT_SET_HOMEPARAMS,
     Kdc101Emulator,
 )
+import numpy as np
 import pytest
 import serial
 
@@ -19,16 +22,39 @@ from mantis_rig.hardware.apt_units import (
     Z8_DATASHEET_COUNTS_PER_MM,
     AptScale,
 )
-from mantis_rig.hardware.interfaces import ConfigurationError, DeviceError, SafetyLimitError
+from mantis_rig.hardware.interfaces import (
+    ConfigurationError,
+    DeviceError,
+    ForceBlock,
+    SafetyLimitError,
+    StageGuard,
+    StageLimits,
+)
 from mantis_rig.hardware.kdc101 import Kdc101Stage
 
 pytestmark = pytest.mark.timeout(30)
 
 MM = 1e-3
+# The protocol's scaling figures for the Z8 (shared/docs/rig.md), written out, not derived.
+VELOCITY_UNITS_PER_MM_S = 772981.4
+ACCELERATION_UNITS_PER_MM_S2 = 263.84
 
 
 def kdc101_threads():
-    return [t for t in threading.enumerate() if t.name.startswith('kdc101')]
+    return [t for t in threading.enumerate() if t.name.startswith(('kdc101', 'stage-guard'))]
+
+
+def fds_open_on(path):
+    """File descriptors of this process open on `path` (the pty's slave device; once the
+    master is closed the link reads '<path> (deleted)')."""
+    found = []
+    for fd in os.listdir('/proc/self/fd'):
+        try:
+            if os.readlink(f'/proc/self/fd/{fd}') in (path, f'{path} (deleted)'):
+                found.append(int(fd))
+        except OSError:
+            pass
+    return found
 
 
 @pytest.fixture(autouse=True)
@@ -47,6 +73,8 @@ def make_emulator():
 
     yield make
     for emulator in emulators:
+        # only the emulator's own slave fd may remain: every stage closed its port
+        assert len(fds_open_on(emulator.port)) == 1, 'a serial port was left open'
         emulator.close()
         assert not emulator.thread_alive
 
@@ -68,9 +96,11 @@ def make_stage():
         stage.close()
 
 
-def assert_link_closed(stage):
+def assert_link_closed(stage, emulator=None):
     assert stage._port is None
     assert not [t for t in threading.enumerate() if t.name.startswith('kdc101-io')]
+    if emulator is not None:       # the driver's fd on the pty is closed, not just forgotten
+        assert len(fds_open_on(emulator.port)) == 1, 'the driver left its port fd open'
 
 
 def wait_until(condition, timeout_s=5.0):
@@ -87,8 +117,8 @@ def wait_until(condition, timeout_s=5.0):
 def test_scale_follows_the_protocol_definition_for_the_z8():
     scale = AptScale()
     assert scale.counts_per_mm == 34554.96
-    assert scale.velocity_per_mm_s == pytest.approx(772981.4, abs=0.1)
-    assert scale.acceleration_per_mm_s2 == pytest.approx(263.84, abs=0.005)
+    assert scale.velocity_per_mm_s == pytest.approx(VELOCITY_UNITS_PER_MM_S, abs=0.1)
+    assert scale.acceleration_per_mm_s2 == pytest.approx(ACCELERATION_UNITS_PER_MM_S2, abs=0.005)
     assert scale.position_to_counts(10 * MM) == 345550
     assert scale.velocity_to_units(1 * MM) == 772981
     assert scale.velocity_to_units(2.4 * MM) == round(2.4 * 772981.37)
@@ -167,14 +197,18 @@ def test_missing_status_updates_end_the_link(make_emulator, make_stage):
     assert wait_until(lambda: stage._failure is not None, 5.0)
     with pytest.raises(DeviceError, match=r'no status update .* for \d+\.\d s \(limit 1 s\)'):
         stage.state()
-    assert_link_closed(stage)
+    assert_link_closed(stage, emu)
 
 
 def test_home(make_emulator, make_stage):
-    emu = make_emulator(position_mm=3.0)
+    emu = make_emulator(position_mm=3.0)            # stored home velocity: 20 mm/s
+    stored = dict(emu.homeparams)
     stage = make_stage(emu.port)
-    stage.home(timeout_s=10.0)
+    stage.home(timeout_s=20.0)
     assert MOT_MOVE_HOME in emu.received
+    # the homing velocity was brought under the ceiling before MOT_MOVE_HOME, the rest kept
+    assert emu.received.index(MOT_SET_HOMEPARAMS) < emu.received.index(MOT_MOVE_HOME)
+    assert emu.homeparams == dict(stored, home_velocity=round(2.0 * VELOCITY_UNITS_PER_MM_S))
     state = stage.state()
     assert state.homed and not state.moving
     assert state.position_m == pytest.approx(0.0, abs=1e-7)
@@ -209,6 +243,9 @@ def test_move_at_then_stop(make_emulator, make_stage, velocity_mm_s):
     emu = make_emulator(position_mm=10.0, homed=True)
     stage = make_stage(emu.port)
     stage.move_at(velocity_mm_s * MM)
+    assert emu.velparams['max_velocity'] == round(2.0 * VELOCITY_UNITS_PER_MM_S)
+    assert emu.velparams['acceleration'] == round(4 * ACCELERATION_UNITS_PER_MM_S2)
+    assert emu.speed_mm_s == pytest.approx(2.0, rel=1e-6)   # the emulator's own conversion
     assert wait_until(lambda: abs(stage.state().position_m - 10 * MM) > 0.2 * MM)
     state = stage.state()
     assert state.moving
@@ -318,7 +355,7 @@ def test_no_reply_at_open(make_emulator, make_stage):
                        match=r'no HW_GET_INFO reply to HW_REQ_INFO from the KDC101 on '
                              + re.escape(emu.port) + r' within 0\.3 s; port closed'):
         stage.open()
-    assert_link_closed(stage)
+    assert_link_closed(stage, emu)
 
 
 def test_move_timeout_stops_the_stage_and_closes(make_emulator, make_stage):
@@ -328,7 +365,7 @@ def test_move_timeout_stops_the_stage_and_closes(make_emulator, make_stage):
                        match=r'no MOT_MOVE_COMPLETED for the move to 4\.0000 mm .* within '
                              r'0\.4 s; port closed'):
         stage.move_to(4 * MM, 0.5 * MM, timeout_s=0.4)
-    assert_link_closed(stage)
+    assert_link_closed(stage, emu)
     assert wait_until(lambda: not emu.moving, 2.0), 'the stage was left moving'
 
 
@@ -339,7 +376,7 @@ def test_device_falling_silent_mid_move(make_emulator, make_stage):
     emu.mute()
     with pytest.raises(DeviceError, match=r'no status update from the KDC101'):
         assert wait_until(lambda: stage.state() is None, 5.0)
-    assert_link_closed(stage)
+    assert_link_closed(stage, emu)
 
 
 def test_garbled_reply(make_emulator, make_stage):
@@ -349,7 +386,7 @@ def test_garbled_reply(make_emulator, make_stage):
     with pytest.raises(DeviceError, match=r'garbled reply from the KDC101: unknown message '
                                           r'0x5aa5 \(header bytes a5 5a de ad be ef\)'):
         stage.identify()
-    assert_link_closed(stage)
+    assert_link_closed(stage, emu)
     with pytest.raises(DeviceError, match='garbled'):
         stage.state()
 
@@ -360,7 +397,7 @@ def test_garbled_status_update_while_idle(make_emulator, make_stage):
     emu.garble_next(replies_only=False)
     with pytest.raises(DeviceError, match='garbled reply'):
         assert wait_until(lambda: stage.state() is None, 5.0)
-    assert_link_closed(stage)
+    assert_link_closed(stage, emu)
 
 
 def test_truncated_reply(make_emulator, make_stage):
@@ -372,7 +409,7 @@ def test_truncated_reply(make_emulator, make_stage):
     with pytest.raises(DeviceError, match=r'truncated [A-Z_]+ message from the KDC101: '
                                           r'got 4 of \d+ data bytes within 0\.3 s'):
         stage.identify()
-    assert_link_closed(stage)
+    assert_link_closed(stage, emu)
 
 
 def test_truncated_header(make_emulator, make_stage):
@@ -382,17 +419,17 @@ def test_truncated_header(make_emulator, make_stage):
     with pytest.raises(DeviceError, match=r'truncated message header from the KDC101: got 3 '
                                           r'of 6 bytes'):
         stage.move_to(3 * MM, 1 * MM)
-    assert_link_closed(stage)
+    assert_link_closed(stage, emu)
 
 
-def test_too_short_message_is_a_clear_error_not_a_struct_error(make_stage, make_emulator):
+def test_too_short_message_is_a_clear_error_not_a_struct_error(make_emulator, make_stage):
     emu = make_emulator()
     stage = make_stage(emu.port)
     emu.shorten_next(data_bytes=4)          # the next status update carries 4 of 14 data bytes
     with pytest.raises(DeviceError, match=r'malformed MOT_GET_DCSTATUSUPDATE message from the '
                                           r'KDC101 \(4 data bytes: 91 04 04 00 81 50'):
         assert wait_until(lambda: stage.state() is None, 5.0)
-    assert_link_closed(stage)
+    assert_link_closed(stage, emu)
 
 
 def test_port_vanishing_mid_move(make_emulator, make_stage):
@@ -402,7 +439,7 @@ def test_port_vanishing_mid_move(make_emulator, make_stage):
     emu.vanish()
     with pytest.raises(DeviceError, match=r'KDC101 port .* (vanished|failed while sending)'):
         assert wait_until(lambda: stage.state() is None, 5.0)
-    assert_link_closed(stage)
+    assert_link_closed(stage, emu)
     with pytest.raises(DeviceError, match='cannot stop the stage: KDC101 port .* is not open'):
         stage.stop()
 
@@ -413,7 +450,7 @@ def test_port_vanishing_before_a_command(make_emulator, make_stage):
     emu.vanish()
     with pytest.raises(DeviceError, match=r'KDC101 port .* (vanished|failed while sending)'):
         stage.move_to(11 * MM, 1 * MM)
-    assert_link_closed(stage)
+    assert_link_closed(stage, emu)
 
 
 def test_missing_port(make_stage):
@@ -428,7 +465,7 @@ def test_wrong_device_model(make_emulator, make_stage):
     stage = make_stage(emu.port, open_=False)
     with pytest.raises(DeviceError, match=r"is a 'TDC001', not a KDC101"):
         stage.open()
-    assert_link_closed(stage)
+    assert_link_closed(stage, emu)
 
 
 # --- life cycle -----------------------------------------------------------------------------
@@ -441,7 +478,7 @@ def test_close_is_idempotent_and_stops_a_moving_stage(make_emulator):
         stage.move_at(1 * MM)
         assert wait_until(lambda: emu.moving, 2.0)
     assert wait_until(lambda: not emu.moving, 2.0)
-    assert_link_closed(stage)
+    assert_link_closed(stage, emu)
     stage.close()
     with pytest.raises(DeviceError, match='not open'):
         stage.state()
@@ -455,3 +492,200 @@ def test_reopen_after_a_failure(make_emulator, make_stage):
         stage.identify()
     stage.open()
     assert stage.state().position_m == pytest.approx(4 * MM, abs=1e-7)
+
+
+def test_homing_speed_is_a_parameter_under_the_ceiling(make_emulator, make_stage):
+    emu = make_emulator(position_mm=1.0)
+    stage = make_stage(emu.port, homing_speed_m_per_s=1.0 * MM)
+    stage.home(timeout_s=20.0)
+    assert emu.homeparams['home_velocity'] == round(VELOCITY_UNITS_PER_MM_S)
+    assert stage.state().homed
+    with pytest.raises(ConfigurationError, match=r'3\.0000 mm/s exceeds the ceiling 2\.400 mm/s'):
+        Kdc101Stage(emu.port, homing_speed_m_per_s=3.0 * MM)
+
+
+# --- the safety envelope itself is refused at configure time ---------------------------------
+
+@pytest.mark.parametrize('kwargs, fragments', [
+    (dict(max_position_m=26 * MM), ['max_position_m 26 mm', '[0, 25] mm']),
+    (dict(min_position_m=-1 * MM), ['min_position_m -1 mm', '[0, 25] mm']),
+    (dict(min_position_m=10 * MM, max_position_m=5 * MM), ['10 mm', 'below', '5 mm']),
+    (dict(max_speed_m_per_s=3 * MM), ['3 mm/s', 'stage maximum 2.4 mm/s']),
+    (dict(max_speed_m_per_s=0.0), ['0 mm/s', '> 0']),
+    (dict(max_acceleration_m_per_s2=-1.0), ['max_acceleration_m_per_s2', '> 0']),
+    (dict(max_position_m=float('nan')), ['max_position_m nan', 'finite']),
+])
+def test_limits_outside_the_stage_are_refused(kwargs, fragments):
+    with pytest.raises(ConfigurationError) as info:
+        StageLimits(**kwargs)
+    for fragment in fragments:
+        assert fragment in str(info.value)
+
+
+def test_limits_at_the_stage_envelope_are_accepted():
+    limits = StageLimits(min_position_m=0.0, max_position_m=25 * MM, max_speed_m_per_s=2.4 * MM)
+    assert limits.max_position_m == 25 * MM
+
+
+@pytest.mark.parametrize('kwargs, pattern', [
+    (dict(counts_per_mm=0.0), r'counts_per_mm 0\.0 must be finite and > 0'),
+    (dict(velocity_per_mm_s=-1.0), r'velocity_per_mm_s -1\.0 must be finite and > 0'),
+    (dict(reply_timeout_s=0.0), r'reply_timeout_s 0\.0 s must be finite and > 0 s'),
+    (dict(stop_timeout_s=float('inf')), r'stop_timeout_s inf s'),
+])
+def test_bad_driver_settings_are_refused(kwargs, pattern):
+    with pytest.raises(ConfigurationError, match=pattern):
+        Kdc101Stage('/dev/null', **kwargs)
+
+
+# --- the force ceiling: StageGuard around the real driver -----------------------------------
+
+@pytest.fixture
+def make_guard(make_emulator, make_stage):
+    guards = []
+
+    def make(position_mm=10.0, **kwargs):
+        emu = make_emulator(position_mm=position_mm, homed=True)
+        guard = StageGuard(make_stage(emu.port), 20.0, **kwargs)
+        guard.open()
+        guards.append(guard)
+        return guard, emu
+
+    yield make
+    for guard in guards:
+        guard.close()
+
+
+def test_force_ceiling_stops_a_velocity_pull_and_latches(make_guard):
+    guard, emu = make_guard(max_force_age_s=None)
+    assert guard.observe_force(5.0) is None
+    guard.move_at(1 * MM)
+    assert wait_until(lambda: emu.moving, 2.0)
+
+    trip = guard.observe_force(np.array([5.0, 25.0, 7.0]))
+    assert isinstance(trip, SafetyLimitError)
+    assert 'force 25.000 N above the ceiling 20 N; stage stopped' in str(trip)
+    assert not emu.moving                        # stopped before observe_force returned
+    assert 'force 25.000 N above the ceiling 20 N' in guard.state().fault
+    assert guard.observe_force(30.0) is None     # latched: no second trip, no stop storm
+
+    stopped_mm = emu.position_mm
+    with pytest.raises(SafetyLimitError, match=r'velocity move at \+1\.0000 mm/s refused: '
+                                               r'force 25\.000 N above'):
+        guard.move_at(1 * MM)
+    with pytest.raises(SafetyLimitError, match=r'move to 12\.0000 mm refused'):
+        guard.move_to(12 * MM, 1 * MM)
+    assert emu.position_mm == stopped_mm
+
+    guard.move_to(9.5 * MM, 2.4 * MM, timeout_s=10.0)   # slackening stays allowed
+    assert emu.position_mm == pytest.approx(9.5, abs=1e-4)
+    with pytest.raises(SafetyLimitError, match=r'latest force 30\.000 N is still above'):
+        guard.clear_force_trip()
+    guard.observe_force(ForceBlock(t0_s=0.0, period_s=1e-4, force_n=np.full(10, 2.0),
+                                   first_index=0))
+    guard.clear_force_trip()
+    assert guard.state().fault is None
+    guard.move_at(1 * MM)
+    assert wait_until(lambda: emu.moving, 2.0)
+    guard.stop()
+    assert not emu.moving
+
+
+def test_force_ceiling_cuts_a_blocking_move_short(make_guard):
+    guard, emu = make_guard(max_force_age_s=None)
+    guard.observe_force(1.0)
+    errors = []
+
+    def move():
+        try:
+            guard.move_to(20 * MM, 1 * MM, timeout_s=30.0)
+        except Exception as exc:     # noqa: BLE001 - handed to the test thread
+            errors.append(exc)
+
+    mover = threading.Thread(target=move, name='kdc101-test-mover')
+    mover.start()
+    assert wait_until(lambda: emu.moving and emu.position_mm > 10.05, 5.0)
+    guard.observe_force(ForceBlock(t0_s=0.0, period_s=1e-4, force_n=np.array([19.0, 21.5]),
+                                   first_index=0))
+    mover.join(timeout=10.0)
+    assert not mover.is_alive()
+    (error,) = errors
+    assert isinstance(error, SafetyLimitError)
+    assert 'force 21.500 N above the ceiling 20 N' in str(error)
+    assert not emu.moving and emu.position_mm < 19.0
+
+
+def test_non_finite_force_trips(make_guard):
+    guard, emu = make_guard(max_force_age_s=None)
+    assert 'non-finite force reading nan N' in str(guard.observe_force([1.0, float('nan')]))
+    with pytest.raises(SafetyLimitError, match='non-finite'):
+        guard.move_at(1 * MM)
+
+
+def test_no_pull_without_fresh_force_readings(make_guard):
+    guard, emu = make_guard(max_force_age_s=1.0)
+    with pytest.raises(SafetyLimitError, match='refused: no force reading yet'):
+        guard.move_at(1 * MM)
+    assert MOT_MOVE_VELOCITY not in emu.received
+    guard.move_at(-1 * MM)                       # slackening needs no force reading
+    assert wait_until(lambda: emu.moving, 2.0)
+    guard.stop()
+
+    guard.observe_force(1.0)
+    guard.move_at(1 * MM)                        # then the readings stop coming
+    assert wait_until(lambda: guard.tripped is not None, 10.0)
+    assert re.search(r'no force reading for \d+\.\d\d s \(limit 1 s\)', str(guard.tripped))
+    assert wait_until(lambda: not emu.moving, 5.0)
+    assert 'cannot be enforced; stage stopped' in guard.state().fault
+
+
+def test_guard_pull_direction_can_be_reversed(make_guard):
+    guard, emu = make_guard(pull_direction=-1, max_force_age_s=None)
+    guard.observe_force(50.0)
+    with pytest.raises(SafetyLimitError, match=r'velocity move at -1\.0000 mm/s refused'):
+        guard.move_at(-1 * MM)
+    guard.move_at(1 * MM)
+    assert wait_until(lambda: emu.moving, 2.0)
+    guard.stop()
+
+
+def test_guard_keeps_the_stage_limits(make_guard):
+    guard, emu = make_guard(max_force_age_s=None)
+    guard.observe_force(0.0)
+    with pytest.raises(ConfigurationError, match=r'2\.5000 mm/s exceeds the ceiling'):
+        guard.move_at(2.5 * MM)
+    with pytest.raises(ConfigurationError, match=r'30\.0000 mm is outside'):
+        guard.move_to(30 * MM, 1 * MM)
+    assert not emu.moving
+
+
+def test_guard_close_releases_driver_and_watchdog(make_emulator):
+    emu = make_emulator(position_mm=10.0, homed=True)
+    stage = Kdc101Stage(emu.port)
+    with StageGuard(stage, 20.0) as guard:
+        assert [t for t in kdc101_threads() if t.name.startswith('stage-guard')]
+        guard.observe_force(1.0)
+        guard.move_at(1 * MM)
+        assert wait_until(lambda: emu.moving, 2.0)
+    assert wait_until(lambda: not emu.moving, 2.0)
+    assert_link_closed(stage, emu)
+    assert not [t for t in kdc101_threads() if t.name.startswith('stage-guard')]
+
+
+@pytest.mark.parametrize('kwargs, pattern', [
+    (dict(force_ceiling_n=0.0), r'force ceiling 0\.0 N must be > 0 N'),
+    (dict(force_ceiling_n=150.0), r'150\.0 N .* load cell capacity 111 N'),
+    (dict(force_ceiling_n=20.0, pull_direction=0), r'pull direction 0'),
+    (dict(force_ceiling_n=20.0, max_force_age_s=-1.0), r'max_force_age_s -1\.0 s'),
+])
+def test_bad_guard_settings_are_refused(kwargs, pattern):
+    with pytest.raises(ConfigurationError, match=pattern):
+        StageGuard(Kdc101Stage('/dev/null'), **kwargs)
+
+
+def test_backends_wrap_the_hardware_stage_in_a_guard():
+    from mantis_rig.hardware import backends
+    guarded = backends.make_stage('hardware', serial_port='/dev/null', force_ceiling_n=15.0)
+    assert isinstance(guarded, StageGuard) and isinstance(guarded.stage, Kdc101Stage)
+    assert guarded.force_ceiling_n == 15.0 and guarded.max_force_age_s == 0.5
+    assert isinstance(backends.make_stage('hardware', serial_port='/dev/null'), Kdc101Stage)

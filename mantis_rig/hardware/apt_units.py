@@ -9,7 +9,10 @@ For a Z8 actuator (34,554.96 counts/mm) that gives â‰ˆ 772,981.4 per mm/s and â‰
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 from typing import Optional
+
+from .interfaces import ConfigurationError
 
 SAMPLE_PERIOD_S = 2048 / 6e6
 FIXED_POINT_SCALE = 2 ** 16
@@ -44,8 +47,11 @@ class AptScale:
     status_velocity_per_mm_s: Optional[float] = None
 
     def __post_init__(self):
-        if not self.counts_per_mm > 0:
-            raise ValueError(f'counts_per_mm must be positive, got {self.counts_per_mm}')
+        for name in ('counts_per_mm', 'velocity_per_mm_s', 'acceleration_per_mm_s2',
+                     'status_velocity_per_mm_s'):
+            value = getattr(self, name)
+            if value is not None and not (value > 0 and math.isfinite(value)):
+                raise ConfigurationError(f'{name} {value!r} must be finite and > 0')
         if self.velocity_per_mm_s is None:
             object.__setattr__(self, 'velocity_per_mm_s',
                                velocity_units_per_mm_s(self.counts_per_mm))

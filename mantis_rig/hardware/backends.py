@@ -18,6 +18,7 @@ from .interfaces import (
     DaqConfig,
     ForceDaq,
     Stage,
+    StageGuard,
     StageLimits,
 )
 from .sim_camera import SimCameraTrigger
@@ -39,11 +40,19 @@ def check_backend(backend: str) -> str:
 
 def make_stage(backend: str, port: Optional[WorldPort] = None, *,
                serial_port: str = DEFAULT_SERIAL_PORT, counts_per_mm: Optional[float] = None,
-               limits: Optional[StageLimits] = None) -> Stage:
+               limits: Optional[StageLimits] = None, force_ceiling_n: Optional[float] = None,
+               max_force_age_s: Optional[float] = 0.5) -> Stage:
+    """With `force_ceiling_n`, the stage comes wrapped in a StageGuard: the caller must then
+    feed it every force reading (StageGuard.observe_force), or pulls are refused and stopped
+    once the readings are older than `max_force_age_s`."""
     if check_backend(backend) == 'sim':
-        return SimStage(_world(port, 'stage'), limits)
-    from .kdc101 import Z8_COUNTS_PER_MM, Kdc101Stage
-    return Kdc101Stage(serial_port, counts_per_mm or Z8_COUNTS_PER_MM, limits=limits)
+        stage: Stage = SimStage(_world(port, 'stage'), limits)
+    else:
+        from .kdc101 import Z8_COUNTS_PER_MM, Kdc101Stage
+        stage = Kdc101Stage(serial_port, counts_per_mm or Z8_COUNTS_PER_MM, limits=limits)
+    if force_ceiling_n is None:
+        return stage
+    return StageGuard(stage, force_ceiling_n, max_force_age_s=max_force_age_s)
 
 
 def make_force_daq(backend: str, port: Optional[WorldPort] = None, *, scene=None,

@@ -314,6 +314,8 @@ class StageGuard(Stage):
         self._trips = 0                  # trips so far: a move compares it before and after
         self._restopped = False          # the watchdog repeated the stop for the current trip
         self._pull_active = False        # a pull was admitted and has not ended
+        self._pull_call_trips: Optional[int] = None   # trip count when the blocking pull call
+        #                                               (move_to, home) in progress was admitted
         self._last_force_n: Optional[float] = None
         self._last_force_time_s: Optional[float] = None
         self._watchdog: Optional[threading.Thread] = None
@@ -393,14 +395,16 @@ class StageGuard(Stage):
                 self._trip = SafetyLimitError(f'{reason}; stage stopped')
                 self._trips += 1
                 self._restopped = False
+                self._pull_active = False
             trip = self._trip
+        if not first:        # already stopped for this trip; slackening moves stay allowed
+            return None
+        log.error('stage guard: %s', trip)
         try:
             self.stage.stop()
         except DeviceError as exc:   # nothing more can be done here: say so loudly
             log.error('stage guard: stopping the stage after "%s" failed: %s', reason, exc)
-        if first:
-            log.error('stage guard: %s', trip)
-        return trip if first else None
+        return trip
 
     def _fresh_force_problem(self) -> Optional[str]:
         """Called with the lock held: why the force readings are too old to pull, or None."""
@@ -415,7 +419,7 @@ class StageGuard(Stage):
                     f'the force ceiling {self.force_ceiling_n:g} N cannot be enforced')
         return None
 
-    def _admit_pull(self, what: str) -> int:
+    def _admit_pull(self, what: str, blocking: bool = False) -> int:
         """Refuse a pull while tripped or blind; mark it active; return the trip count."""
         with self._lock:
             if self._trip is not None:
@@ -425,12 +429,15 @@ class StageGuard(Stage):
             if problem is not None:
                 raise SafetyLimitError(f'{what} refused: {problem}')
             self._pull_active = True
+            if blocking:
+                self._pull_call_trips = self._trips
             return self._trips
 
     def _after_pull(self, trips_before: int, keep_active: bool) -> None:
         """After a pull command: if a trip happened meanwhile, stop (again) and raise."""
         with self._lock:
             trip = self._trip if self._trips != trips_before else None
+            self._pull_call_trips = None
             if trip is not None or not keep_active:
                 self._pull_active = False
         if trip is not None:
@@ -444,7 +451,11 @@ class StageGuard(Stage):
         while not self._stop_watchdog.wait(self._watchdog_period_s):
             with self._lock:
                 active = self._pull_active
-                restop = active and self._trip is not None and not self._restopped
+                # a blocking pull admitted before the latest trip is still running: its move
+                # command may have reached the controller after the trip's stop, so stop again
+                call_trips = self._pull_call_trips
+                restop = (call_trips is not None and call_trips != self._trips
+                          and not self._restopped)
                 if restop:
                     self._restopped = True
                 stale = (active and self._trip is None
@@ -472,7 +483,7 @@ class StageGuard(Stage):
         if self.pull_direction > 0:        # homing runs to the reverse end: it slackens
             self.stage.home(timeout_s)
             return
-        trips = self._admit_pull('homing')
+        trips = self._admit_pull('homing', blocking=True)
         try:
             self.stage.home(timeout_s)
         finally:
@@ -486,10 +497,10 @@ class StageGuard(Stage):
             self._end_pull()
             self.stage.move_to(position_m, speed_m_per_s, timeout_s)
             return
-        trips = self._admit_pull(f'move to {position_m * 1e3:.4f} mm')
+        trips = self._admit_pull(f'move to {position_m * 1e3:.4f} mm', blocking=True)
         try:
             self.stage.move_to(position_m, speed_m_per_s, timeout_s)
-        except DeviceError:
+        except BaseException:
             self._after_pull(trips, keep_active=False)   # a trip's SafetyLimitError wins
             raise
         self._after_pull(trips, keep_active=False)
@@ -503,7 +514,7 @@ class StageGuard(Stage):
         trips = self._admit_pull(f'velocity move at {velocity_m_per_s * 1e3:+.4f} mm/s')
         try:
             self.stage.move_at(velocity_m_per_s)
-        except DeviceError:
+        except BaseException:
             self._after_pull(trips, keep_active=False)
             raise
         self._after_pull(trips, keep_active=True)

@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 import io
 import logging
+import math
 import struct
 import threading
 import time
@@ -44,6 +45,7 @@ STOP_IMMEDIATE = 1
 HEADER_BYTES = 6
 MAX_DATA_BYTES = 255       # APT spec: no data packet exceeds 255 bytes
 READ_POLL_S = 0.05
+DEFAULT_HOMING_SPEED_M_PER_S = 2.0e-3   # (capped by the limits) set before every homing
 
 # thorlabs_apt_protocol calls the DC servo status messages MOT_*_DCSTATUSUPDATE (0x0490-0x0492);
 # newer editions of the APT document name the same ids MOT_*_USTATUSUPDATE.
@@ -72,7 +74,9 @@ def is_moving(status) -> bool:
 class Kdc101Stage(Stage):
     """A KDC101 driving a Z8 actuator (MTS25/M-Z8). Positions are in the controller's frame
     (0 at home), in metres; the soft travel limits and the speed ceiling of `limits` hold
-    whatever the caller asks."""
+    whatever the caller asks, homing included (its velocity is set to `homing_speed_m_per_s`
+    before every MOT_MOVE_HOME). The force ceiling needs the force: wrap the stage in
+    interfaces.StageGuard and feed it the load-cell readings."""
 
     def __init__(self, port: str, counts_per_mm: float = Z8_COUNTS_PER_MM,
                  velocity_per_mm_s: Optional[float] = None,
@@ -81,11 +85,26 @@ class Kdc101Stage(Stage):
                  status_velocity_per_mm_s: Optional[float] = None,
                  reply_timeout_s: float = 1.0, stop_timeout_s: float = 2.0,
                  status_timeout_s: float = 1.5, frame_timeout_s: float = 0.5,
-                 keepalive_period_s: float = 1.0, expected_model: Optional[str] = 'KDC101'):
+                 keepalive_period_s: float = 1.0, expected_model: Optional[str] = 'KDC101',
+                 homing_speed_m_per_s: Optional[float] = None):
         self.port_path = port
         self.scale = AptScale(counts_per_mm, velocity_per_mm_s, acceleration_per_mm_s2,
                               status_velocity_per_mm_s)
         self.limits = limits if limits is not None else StageLimits()
+        for name, value in (('reply_timeout_s', reply_timeout_s),
+                            ('stop_timeout_s', stop_timeout_s),
+                            ('status_timeout_s', status_timeout_s),
+                            ('frame_timeout_s', frame_timeout_s),
+                            ('keepalive_period_s', keepalive_period_s)):
+            if not (value > 0 and math.isfinite(value)):
+                raise ConfigurationError(f'{name} {value!r} s must be finite and > 0 s')
+        if homing_speed_m_per_s is None:
+            homing_speed_m_per_s = min(DEFAULT_HOMING_SPEED_M_PER_S, self.limits.max_speed_m_per_s)
+        self.limits.check_speed(homing_speed_m_per_s)
+        if not homing_speed_m_per_s > 0:
+            raise ConfigurationError(f'homing speed {homing_speed_m_per_s * 1e3:g} mm/s must be '
+                                     f'> 0 mm/s')
+        self.homing_speed_m_per_s = homing_speed_m_per_s
         self.reply_timeout_s = reply_timeout_s
         self.stop_timeout_s = stop_timeout_s
         self.status_timeout_s = status_timeout_s
@@ -199,6 +218,7 @@ class Kdc101Stage(Stage):
 
     def home(self, timeout_s: float = 60.0) -> None:
         self._settle_pending_stop()
+        self._set_homing_velocity()
         seq = self._begin_motion(_Motion('home', -1, 'homing'))
         self._send(apt.mot_move_home(CONTROLLER, HOST, CHANNEL))
         msg = self._wait_for(lambda m: m.msg in ('mot_move_homed', 'mot_move_stopped'), seq,
@@ -324,6 +344,28 @@ class Kdc101Stage(Stage):
             raise DeviceError(
                 f'KDC101 did not take the velocity parameters: sent max velocity {speed_units}, '
                 f'acceleration {accel_units}; it reports {got.max_velocity}, {got.acceleration}')
+
+    def _set_homing_velocity(self) -> None:
+        """Homing runs at the controller's stored home velocity, which may be anything: set it
+        to `homing_speed_m_per_s` (under the ceiling), keeping the stored direction, limit
+        switch and offset, and read it back."""
+        wanted = self.scale.velocity_to_units(self.homing_speed_m_per_s)
+        got = self._request_home_params()
+        if got.home_velocity == wanted:
+            return
+        self._send(apt.mot_set_homeparams(CONTROLLER, HOST, CHANNEL, got.home_dir,
+                                          got.limit_switch, wanted, got.offset_distance))
+        again = self._request_home_params()
+        if again.home_velocity != wanted:
+            raise DeviceError(
+                f'KDC101 did not take the homing velocity: sent {wanted} '
+                f'({self.homing_speed_m_per_s * 1e3:g} mm/s), it reports {again.home_velocity}')
+
+    def _request_home_params(self):
+        seq = self._seq_now()
+        self._send(apt.mot_req_homeparams(CONTROLLER, HOST, CHANNEL))
+        return self._wait_for(lambda m: m.msg == 'mot_get_homeparams', seq, self.reply_timeout_s,
+                              'MOT_GET_HOMEPARAMS reply to MOT_REQ_HOMEPARAMS')
 
     def _settle_pending_stop(self) -> None:
         """Let the confirmation of an earlier stop arrive, so that it cannot be taken for the

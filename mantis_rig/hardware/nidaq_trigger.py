@@ -39,6 +39,10 @@ class NidaqCameraTrigger(CameraTrigger):
     trigger() returns the host-clock time (`clock_s`, default time.monotonic: the clock of
     NidaqForceDaq.t0_s) halfway through the call that drives the active edge (DO write or
     counter start); the edge itself comes somewhere within that call plus the USB latency.
+
+    arm() validates and records the camera settings; the camera itself is set up in its own
+    software. frame_timestamps() stays None: the DAQ sees no frames (the camera's saved file
+    has their times).
     """
 
     def __init__(self, output: str = 'Dev1/port0/line0', *, pulse_width_s: float = 1e-3,

@@ -29,6 +29,7 @@ VELOCITY_UNITS_PER_COUNT_S = SAMPLE_PERIOD_S * 2 ** 16   # APT velocity unit, pe
 HW_REQ_INFO, HW_GET_INFO = 0x0005, 0x0006
 HW_START_UPDATEMSGS, HW_STOP_UPDATEMSGS = 0x0011, 0x0012
 MOD_SET_CHANENABLESTATE = 0x0210
+MOT_SET_HOMEPARAMS, MOT_REQ_HOMEPARAMS, MOT_GET_HOMEPARAMS = 0x0440, 0x0441, 0x0442
 MOT_SET_VELPARAMS, MOT_REQ_VELPARAMS, MOT_GET_VELPARAMS = 0x0413, 0x0414, 0x0415
 MOT_MOVE_HOME, MOT_MOVE_HOMED = 0x0443, 0x0444
 MOT_MOVE_ABSOLUTE, MOT_MOVE_VELOCITY = 0x0453, 0x0457
@@ -61,7 +62,12 @@ class Kdc101Emulator:
         self.status_period_s = status_period_s
         self.ack_timeout_s = ack_timeout_s
         self._serial_number, self._model, self._firmware = serial_number, model, firmware
-        self._home_speed_counts_s = home_speed_mm_s * counts_per_mm
+        # the controller's stored homing parameters (reverse, reverse switch, 0.1 mm offset);
+        # the default stored velocity is deliberately far above the rig's 2.4 mm/s ceiling
+        self.homeparams = {'home_dir': 2, 'limit_switch': 1,
+                           'home_velocity': round(home_speed_mm_s * counts_per_mm
+                                                  * VELOCITY_UNITS_PER_COUNT_S),
+                           'offset_distance': round(0.1 * counts_per_mm)}
         self._position = position_mm * counts_per_mm        # counts, float
         self._homed = homed
         self._fwd_switch = travel_mm * counts_per_mm
@@ -257,6 +263,15 @@ class Kdc101Emulator:
         elif msgid == MOT_SET_VELPARAMS:
             _, vmin, acc, vmax = struct.unpack_from('<H3l', frame, 6)
             self.velparams = {'min_velocity': vmin, 'acceleration': acc, 'max_velocity': vmax}
+        elif msgid == MOT_SET_HOMEPARAMS:
+            _, direction, switch, velocity, offset = struct.unpack_from('<3Hll', frame, 6)
+            self.homeparams = {'home_dir': direction, 'limit_switch': switch,
+                               'home_velocity': velocity, 'offset_distance': offset}
+        elif msgid == MOT_REQ_HOMEPARAMS:
+            p = self.homeparams
+            self._send(long_message(MOT_GET_HOMEPARAMS, struct.pack(
+                '<3Hll', CHANNEL, p['home_dir'], p['limit_switch'], p['home_velocity'],
+                p['offset_distance'])))
         elif msgid == MOT_REQ_VELPARAMS:
             p = self.velparams
             self._send(long_message(MOT_GET_VELPARAMS, struct.pack(
@@ -278,10 +293,7 @@ class Kdc101Emulator:
         dt, self._last_tick = now - self._last_tick, now
         if self._mode is None or not self._enabled:
             return
-        if self._mode == 'home':
-            speed = self._home_speed_counts_s
-        else:
-            speed = self.velparams['max_velocity'] / VELOCITY_UNITS_PER_COUNT_S
+        speed = self._speed_counts_s()
         step = speed * dt * self._direction
         target = self._target if self._mode != 'velocity' else math.copysign(math.inf, step)
         new = self._position + step
@@ -306,6 +318,19 @@ class Kdc101Emulator:
             else:
                 self._send(long_message(MOT_MOVE_COMPLETED, self._status_data()))
 
+    def _speed_counts_s(self) -> float:
+        """The speed of the current move, from the APT velocity units the host set (the
+        protocol's definition, independent of the driver's apt_units)."""
+        units = (self.homeparams['home_velocity'] if self._mode == 'home'
+                 else self.velparams['max_velocity'])
+        return units / VELOCITY_UNITS_PER_COUNT_S
+
+    @property
+    def speed_mm_s(self) -> float:
+        """The speed of the current move (or of the last velocity setting), mm/s."""
+        with self._lock:
+            return self._speed_counts_s() / self.counts_per_mm
+
     def _status_data(self) -> bytes:
         bits = MOTOR_CONNECTED | (CHANNEL_ENABLED if self._enabled else 0)
         bits |= FWD_LIMIT if self._position >= self._fwd_switch - 0.5 else 0
@@ -315,9 +340,7 @@ class Kdc101Emulator:
         if self._mode is not None:
             bits |= MOVING_FWD if self._direction > 0 else MOVING_REV
             bits |= HOMING if self._mode == 'home' else 0
-            speed = (self._home_speed_counts_s if self._mode == 'home'
-                     else self.velparams['max_velocity'] / VELOCITY_UNITS_PER_COUNT_S)
-            velocity_counts_s = speed * self._direction
+            velocity_counts_s = self._speed_counts_s() * self._direction
         # velocity field: counts per servo sample period (see AptScale.status_velocity_per_mm_s)
         velocity_field = max(-32768, min(32767, round(velocity_counts_s * SAMPLE_PERIOD_S)))
         return struct.pack('<HlhHL', CHANNEL, round(self._position), velocity_field, 0, bits)
