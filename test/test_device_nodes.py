@@ -28,7 +28,7 @@ from mantis_rig.nodes.camera_node import CameraNode
 from mantis_rig.nodes.loadcell_node import LoadcellNode
 from mantis_rig.nodes.sim_world_node import SimWorldNode
 from mantis_rig.nodes.stage_node import StageNode
-from mantis_rig.recording.force_block import force_block_from_msg
+from mantis_rig.recording.force_block import force_block_from_msg, force_block_to_msg
 from mantis_rig.recording.marker_block import concatenate, marker_block_from_msg
 
 PULL_M_PER_S = 2.33e-3
@@ -412,17 +412,51 @@ def test_hardware_stage_node_on_the_kdc101_emulator(rig):
         refused = rig.wait_for(lambda: [s for s in rig.diagnostics('stage_node')
                                         if s.level == DiagnosticStatus.WARN], 'a refusal', 30.0)
         assert 'exceeds the ceiling' in refused[-1].message
+        # the driver-level force guard: no force reading, no pull
+        rig.velocity.publish(Float64(data=2e-3))
+        refused = rig.wait_for(lambda: [s for s in rig.diagnostics('stage_node')
+                                        if 'force reading' in s.message], 'a blind pull refused',
+                               30.0)
+        assert refused[-1].level == DiagnosticStatus.WARN
+        time.sleep(0.5)
+        assert abs(rig.messages('/stage/joint_state')[-1].position[0]) < 0.05e-3   # homed at 0
+        # with the load cell's stream below the ceiling the stage pulls
+        forces = rig.client.create_publisher(Float64MultiArray, '/loadcell/force_block', 100)
+        feeding = threading.Event()
+
+        def feed(newtons):
+            while not feeding.is_set():
+                forces.publish(force_block_to_msg(time.time_ns(), 50_000, np.full(200, newtons)))
+                time.sleep(0.01)
+        feeder = threading.Thread(target=feed, args=(5.0,), daemon=True)
+        feeder.start()
+        time.sleep(0.3)
         rig.velocity.publish(Float64(data=2e-3))
         rig.wait_for(lambda: rig.messages('/stage/joint_state')[-1].position[0] > 0.2e-3,
                      'the stage to move', 30.0)
-        assert rig.call(Trigger, '/stage/stop').success
+        # a block over the ceiling (30 N) stops it, in the driver layer: a fault
+        feeding.set()
+        feeder.join()
+        forces.publish(force_block_to_msg(time.time_ns(), 50_000, np.full(200, 31.0)))
+        tripped = rig.wait_for(lambda: [s for s in rig.diagnostics('stage_node')
+                                        if 'above the ceiling' in s.message], 'the trip', 30.0)
+        assert tripped[-1].level == DiagnosticStatus.ERROR
+        rig.wait_for(lambda: rig.state('stage_node') == 'unconfigured', 'the fault', 30.0)
+        assert not emulator.moving
+        assert rig.transition('stage_node', Transition.TRANSITION_CONFIGURE)   # a new guard
+        assert rig.transition('stage_node', Transition.TRANSITION_ACTIVATE)
+        released_before = len(device_released(rig, 'stage_node'))       # by the trip's fault
         emulator.vanish()                                        # the USB cable is pulled
-        errors = rig.wait_for(lambda: [s for s in rig.diagnostics('stage_node')
-                                       if 'device released' in s.message], 'on_error', 30.0)
-        assert errors[-1].level == DiagnosticStatus.ERROR
-        assert rig.state('stage_node') == 'unconfigured'
+        rig.wait_for(lambda: len(device_released(rig, 'stage_node')) > released_before, 'on_error',
+                     30.0)
+        assert device_released(rig, 'stage_node')[-1].level == DiagnosticStatus.ERROR
+        rig.wait_for(lambda: rig.state('stage_node') == 'unconfigured', 'unconfigured', 30.0)
     finally:
         emulator.close()
+
+
+def device_released(rig, node):
+    return [s for s in rig.diagnostics(node) if 'device released' in s.message]
 
 
 def test_hardware_loadcell_node_on_the_fake_daq(rig, monkeypatch):

@@ -8,6 +8,7 @@ starts rather than inside its configure transition. Devices come back unopened.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Optional
 
 from mantis_sim.scene import Scene, load_scene
@@ -41,10 +42,12 @@ def check_backend(backend: str) -> str:
 def make_stage(backend: str, port: Optional[WorldPort] = None, *,
                serial_port: str = DEFAULT_SERIAL_PORT, counts_per_mm: Optional[float] = None,
                limits: Optional[StageLimits] = None, force_ceiling_n: Optional[float] = None,
-               max_force_age_s: Optional[float] = 0.5) -> Stage:
+               max_force_age_s: Optional[float] = 0.5,
+               clock_s: Optional[Callable[[], float]] = None) -> Stage:
     """With `force_ceiling_n`, the stage comes wrapped in a StageGuard: the caller must then
     feed it every force reading (StageGuard.observe_force), or pulls are refused and stopped
-    once the readings are older than `max_force_age_s`."""
+    once the readings are older than `max_force_age_s` on `clock_s` (default: monotonic wall
+    time; the simulated rig passes its simulated clock)."""
     if check_backend(backend) == 'sim':
         stage: Stage = SimStage(_world(port, 'stage'), limits)
     else:
@@ -52,7 +55,8 @@ def make_stage(backend: str, port: Optional[WorldPort] = None, *,
         stage = Kdc101Stage(serial_port, counts_per_mm or Z8_COUNTS_PER_MM, limits=limits)
     if force_ceiling_n is None:
         return stage
-    return StageGuard(stage, force_ceiling_n, max_force_age_s=max_force_age_s)
+    clock = {'clock_s': clock_s} if clock_s is not None else {}
+    return StageGuard(stage, force_ceiling_n, max_force_age_s=max_force_age_s, **clock)
 
 
 def make_force_daq(backend: str, port: Optional[WorldPort] = None, *, scene=None,

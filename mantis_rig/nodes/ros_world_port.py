@@ -1,11 +1,10 @@
 """WorldPort over ROS: a simulated backend in a device node talks to sim_world_node on /sim/*.
 
-The port's topics live on a node of its own (`<device node>_world_port`) spun by a
-SingleThreadedExecutor in the port's own thread. The world's streams arrive at 100 messages a
-second; in the device node's MultiThreadedExecutor, which rebuilds its wait set in Python for
-every wake-up over all of the node's entities, they cost the simulated DAQ node a whole core and
-lost force blocks on a 2-core machine. A backend call (tendon_force, marker_frames, wait_until)
-blocks in the caller's thread until the messages it waits for arrive. Held data:
+The port's topics live on a SideNode (`<device node>_world_port`, executors.py): the world's
+streams arrive at 100 messages a second, and through the device node's MultiThreadedExecutor
+they cost the simulated DAQ node a whole core and lost force blocks on a 2-core machine.
+A backend call (tendon_force, marker_frames, wait_until) blocks in the caller's thread until
+the messages it waits for arrive. Held data:
 
 * the true tendon force of the last `history_s` simulated seconds, as the world published it
   (a gap in the stream drops what was held: samples are never made up across a gap);
@@ -20,14 +19,13 @@ import threading
 import time
 
 import numpy as np
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from mantis_rig.hardware.interfaces import DeviceError
 from mantis_rig.hardware.world_port import WorldPort, WorldTimeout
+from mantis_rig.nodes.executors import SideNode
 from mantis_rig.recording.marker_block import marker_block_from_msg
 
 FORCE_TOPIC = '/sim/tendon_force'
@@ -61,10 +59,8 @@ class RosWorldPort(WorldPort):
         self._stage: tuple[float, float, float] | None = None   # (t_s, position, velocity)
         self._replies: deque = deque(maxlen=8)         # MarkerFrames from the world
         self._closed = False
-        self._port_node = rclpy.create_node(f'{node.get_name()}_world_port',
-                                            context=node.context,
-                                            start_parameter_services=False)
-        port = self._port_node
+        self._side = SideNode(node, 'world_port')
+        port = self._side.node
         self._command_pub = port.create_publisher(Float64MultiArray, STAGE_COMMAND_TOPIC, 10)
         self._request_pub = port.create_publisher(Float64MultiArray, CAMERA_REQUEST_TOPIC, 10)
         port.create_subscription(Float64MultiArray, CAMERA_FRAMES_TOPIC, self._on_frames, 10)
@@ -76,16 +72,6 @@ class RosWorldPort(WorldPort):
             # of stale states (a position move would see the target late and overshoot).
             port.create_subscription(JointState, STAGE_STATE_TOPIC, self._on_stage,
                                      LATEST_QOS)
-        self._executor = SingleThreadedExecutor(context=node.context)
-        self._executor.add_node(port)
-        self._spinner = threading.Thread(target=self._spin, name='world-port', daemon=True)
-        self._spinner.start()
-
-    def _spin(self) -> None:
-        try:
-            self._executor.spin()
-        except Exception:       # noqa: BLE001 - the context went down under us: close() follows
-            pass
 
     def close(self) -> None:
         """Wake every waiter with DeviceError and drop the port's topics (idempotent)."""
@@ -94,9 +80,7 @@ class RosWorldPort(WorldPort):
                 return
             self._closed = True
             self._cond.notify_all()
-        self._executor.shutdown(timeout_sec=5.0)
-        self._spinner.join(timeout=5.0)
-        self._port_node.destroy_node()
+        self._side.close()
 
     def wait_for_world(self, timeout_s: float) -> None:
         """Block until every subscribed stream has been heard from."""

@@ -6,6 +6,10 @@ effort [0.0]: not measured, but never empty, which the rosbags reader needs),
 worker thread; any new command or /stage/stop ends it), /stage/home blocks until homed.
 /stage/stop works whenever the device is open. A command the driver's safety envelope refuses
 (speed ceiling, travel limits) is refused with a warning; a device error is a fault.
+The force ceiling holds in the driver layer too: the stage is a StageGuard fed with every
+/loadcell/force_block (on a SideNode: 100 messages a second), which stops the stage above
+`force_ceiling_n` and refuses or stops a pull when the readings are older than
+`max_force_age_s` (simulated time on the simulated rig); a trip is a fault.
 /diagnostics carries the stage's position, velocity and `homed` ('true'/'false') whenever the
 stage is open.
 """
@@ -14,16 +18,24 @@ from __future__ import annotations
 import math
 import sys
 import threading
+import time
 
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64
+from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import Trigger
 
 from mantis_rig.hardware import backends
 from mantis_rig.hardware.apt_units import Z8_COUNTS_PER_MM
-from mantis_rig.hardware.interfaces import ConfigurationError, DeviceError, StageLimits
+from mantis_rig.hardware.interfaces import (
+    LOADCELL_CAPACITY_N,
+    ConfigurationError,
+    DeviceError,
+    SafetyLimitError,
+    StageLimits,
+)
 from mantis_rig.nodes.device_node import OK, WARN, DeviceNode, Param
-from mantis_rig.nodes.executors import run_node
+from mantis_rig.nodes.executors import SideNode, run_node
+from mantis_rig.recording.force_block import force_block_from_msg
 
 HOME_TIMEOUT_S = 120.0
 MOVE_TIMEOUT_S = 120.0
@@ -39,6 +51,10 @@ class StageNode(DeviceNode):
               (1e-6, StageLimits().max_speed_m_per_s), at_configure=False),
         Param('joint_state_rate_hz', 100.0, '/stage/joint_state rate, Hz (read at activate)',
               (1.0, 1000.0), at_configure=False),
+        Param('force_ceiling_n', 30.0, 'driver-level force ceiling: the stage stops and refuses '
+              'to pull above this tendon force, N', (0.5, LOADCELL_CAPACITY_N)),
+        Param('max_force_age_s', 0.5, 'a pull needs a force reading at most this old, s; a '
+              'pull whose readings stop is stopped', (0.05, 10.0)),
     )
 
     def __init__(self, node_name: str = 'stage_node', **kwargs):
@@ -58,12 +74,18 @@ class StageNode(DeviceNode):
         self._last_state = None
         self._refused: str | None = None
         self._stopping = False          # a move ending now was stopped on purpose
+        self._force_feed = SideNode(self, 'force_guard')
+        self._force_feed.node.create_subscription(Float64MultiArray, '/loadcell/force_block',
+                                                  self._on_force_block, 100)
 
     # --- lifecycle hooks --------------------------------------------------------------------
     def open_device(self, port):
         stage = backends.make_stage(self.backend_name, port,
                                     serial_port=self.param('serial_port'),
-                                    counts_per_mm=self.param('counts_per_mm'))
+                                    counts_per_mm=self.param('counts_per_mm'),
+                                    force_ceiling_n=self.param('force_ceiling_n'),
+                                    max_force_age_s=self.param('max_force_age_s'),
+                                    clock_s=self._guard_clock())
         stage.open()
         try:
             info = stage.identify()
@@ -74,6 +96,7 @@ class StageNode(DeviceNode):
         return stage
 
     def start_streaming(self) -> None:
+        self.device.clear_force_trip()      # refused while the force is still over the ceiling
         self._refused = None
         self._publish_state()
         self._timer = self.create_timer(1.0 / self.param('joint_state_rate_hz'),
@@ -102,6 +125,28 @@ class StageNode(DeviceNode):
         if self._refused:
             values['last_refused_command'] = self._refused
         return values
+
+    def destroy_node(self):
+        super().destroy_node()
+        self._force_feed.close()
+
+    # --- the force guard --------------------------------------------------------------------
+    def _guard_clock(self):
+        if not self.sim():
+            return time.monotonic
+        return lambda: self.get_clock().now().nanoseconds * 1e-9
+
+    def _on_force_block(self, msg: Float64MultiArray) -> None:
+        stage = self.device
+        if stage is None:
+            return
+        try:
+            trip = stage.observe_force(force_block_from_msg(msg).forces_n)
+        except (DeviceError, ValueError) as exc:
+            self.fault(f'force guard: {exc}')
+            return
+        if trip is not None:
+            self.fault(f'force guard: {trip}')
 
     # --- streaming --------------------------------------------------------------------------
     def _publish_state(self) -> None:
@@ -182,7 +227,7 @@ class StageNode(DeviceNode):
             if self._refused is not None:
                 self._refused = None
                 self.report(OK, f'active ({self.backend_name})')
-        except ConfigurationError as exc:
+        except (ConfigurationError, SafetyLimitError) as exc:   # the driver's envelope
             self._refuse(f'{what} refused: {exc}')
         except DeviceError as exc:
             if self.device is stage and self.is_active and not self._stopping:
