@@ -55,8 +55,7 @@ def run_sim(args) -> int:
     if args.plot:
         sim_report.plot_trial(result, args.plot)
     if args.json:
-        metrics = {k: v for k, v in result.metrics.items()}
-        print(json.dumps(metrics))
+        print(json.dumps(result.to_json_dict()))
     else:
         print(sim_report.summary_text(result))
         for label, path in (('trajectory', args.out), ('plot', args.plot)):

@@ -206,8 +206,8 @@ def build_section(name: str, data: Any, base=None):
     values = {}
     for key, value in data.items():
         if key not in known:
-            raise ParameterError(f'unknown key {name}.{key}; valid keys in {name}: '
-                                 f'{", ".join(known)}')
+            raise ParameterError(f'unknown key {name}.{key} (= {value!r}); valid keys in '
+                                 f'{name}: {", ".join(known)}')
         values[key] = _check_value(f'{name}.{key}', known[key].metadata, known[key].type, value)
     return replace(base if base is not None else cls(), **values)
 

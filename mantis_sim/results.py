@@ -10,6 +10,11 @@ import numpy as np
 from .hybrid import PHASES, HybridSimulator, RawRun
 from .scene import Scene
 
+# The keys of `mantis sim --json`, exactly: other tools read them (issue 2).
+JSON_KEYS = ('peak_tip_speed_mps', 'max_spring_energy_mJ', 'peak_tendon_force_N', 'phase_start_s',
+             'phase_duration_s', 'energy_balance_residual_mJ', 'wall_time_s', 'rhs_evals',
+             'effects', 'solver', 'rtol')
+
 
 @dataclass
 class Trajectory:
@@ -42,7 +47,8 @@ class SimulationResult:
     raw: RawRun
 
     def to_json_dict(self) -> dict:
-        return dict(self.metrics)
+        """The stable subset of the metrics that `mantis sim --json` prints (JSON_KEYS)."""
+        return {key: self.metrics[key] for key in JSON_KEYS}
 
     def state_at(self, t_ms: float) -> Optional[tuple]:
         """Interpolated (th1, th3, w1, w3) at t_ms, when simulated with dense output."""
@@ -55,8 +61,9 @@ class SimulationResult:
 def simulate(scene: Scene, dense: bool = False) -> SimulationResult:
     sim = HybridSimulator(scene, dense=dense)
     raw = sim.run()
+    rhs_evals = sim.model.rhs_evals      # the run's; building the trajectory evaluates more
     trajectory = _trajectory(sim, raw)
-    metrics = _metrics(sim, raw, trajectory)
+    metrics = _metrics(sim, raw, trajectory, rhs_evals)
     return SimulationResult(scene, trajectory, metrics, raw.events, raw)
 
 
@@ -84,7 +91,7 @@ def _event_time(raw: RawRun, name: str) -> Optional[float]:
     return next((t for n, t, _ in raw.events if n == name), None)
 
 
-def _metrics(sim: HybridSimulator, raw: RawRun, tr: Trajectory) -> dict:
+def _metrics(sim: HybridSimulator, raw: RawRun, tr: Trajectory, rhs_evals: int) -> dict:
     model, mech = sim.model, sim.model.mech
     starts = {p: raw.phase_start_ms.get(p) for p in PHASES}
     peak_t = raw.peak_time_ms if not math.isnan(raw.peak_time_ms) else None
@@ -121,7 +128,7 @@ def _metrics(sim: HybridSimulator, raw: RawRun, tr: Trajectory) -> dict:
         'max_constraint_drift_mm': _constraint_drift(raw, tr),
         'events': [(n, t * 1e-3) for n, t, _ in raw.events],
         'wall_time_s': raw.wall_time_s,
-        'rhs_evals': model.rhs_evals,
+        'rhs_evals': rhs_evals,
         'solver_steps': raw.solver_steps,
         'effects': list(model.effects),
         'solver': sim.method,

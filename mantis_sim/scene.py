@@ -90,8 +90,8 @@ class Scene:
                 continue
             section, _, name = key.partition('.')
             if section not in SECTIONS or not name:
-                raise ParameterError(f'unknown key {key!r}; keys are section.name with section '
-                                     f'one of: {", ".join(SECTIONS)}, or effects')
+                raise ParameterError(f'unknown key {key!r} (= {value!r}); keys are section.name '
+                                     f'with section one of: {", ".join(SECTIONS)}, or effects')
             updated = build_section(section, {name: value}, getattr(scene, section))
             scene = replace(scene, **{section: updated})
         _check_consistency(scene)
@@ -114,11 +114,13 @@ def _parse_scalar(raw: str):
 
 def _effects(value, where: str) -> frozenset:
     if not isinstance(value, (list, tuple)):
-        raise ParameterError(f'{where}: effects must be a list, got {value!r}')
+        raise ParameterError(f'{where}: effects = {value!r} is not a list; valid effects: '
+                             f'{", ".join(EFFECTS)}')
     unknown = [e for e in value if e not in EFFECTS]
     if unknown:
-        raise ParameterError(f'{where}: unknown effect(s) {", ".join(map(str, unknown))}; '
-                             f'valid effects: {", ".join(EFFECTS)}')
+        raise ParameterError(f'{where}: effects = {list(value)!r}: unknown effect(s) '
+                             f'{", ".join(map(str, unknown))}; valid effects: '
+                             f'{", ".join(EFFECTS)}')
     return frozenset(value)
 
 
@@ -147,8 +149,8 @@ def scene_from_dict(data, name: str = '<scene>') -> Scene:
     sections = {}
     for key, value in data.items():
         if key not in SECTIONS:
-            raise ParameterError(f'{scene_name}: unknown section {key!r}; valid sections: '
-                                 f'name, description, effects, {", ".join(SECTIONS)}')
+            raise ParameterError(f'{scene_name}: unknown key {key!r} (= {value!r}); valid '
+                                 f'keys: name, description, effects, {", ".join(SECTIONS)}')
         sections[key] = build_section(key, value or {})
     scene = Scene(name=str(scene_name), description=str(description), effects=effects,
                   **sections)
@@ -156,11 +158,26 @@ def scene_from_dict(data, name: str = '<scene>') -> Scene:
     return scene
 
 
+def _yaml_problem(exc: yaml.YAMLError) -> str:
+    """' at line L, column C: what is wrong (while parsing what, where)', on one line."""
+    mark, problem = getattr(exc, 'problem_mark', None), getattr(exc, 'problem', None)
+    if mark is None or problem is None:
+        return ': ' + ' '.join(str(exc).split())
+    text = f' at line {mark.line + 1}, column {mark.column + 1}: {problem}'
+    context, context_mark = getattr(exc, 'context', None), getattr(exc, 'context_mark', None)
+    if context:
+        text += f' ({context}'
+        if context_mark is not None:
+            text += f' at line {context_mark.line + 1}, column {context_mark.column + 1}'
+        text += ')'
+    return text
+
+
 def load_scene_file(path: Path) -> Scene:
     try:
         data = yaml.safe_load(Path(path).read_text())
     except yaml.YAMLError as exc:
-        raise SceneError(f'{path}: not valid YAML: {exc}') from None
+        raise SceneError(f'{path}: not valid YAML{_yaml_problem(exc)}') from None
     except OSError as exc:
         raise SceneError(f'{path}: cannot read: {exc.strerror}') from None
     try:
