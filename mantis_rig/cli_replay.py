@@ -112,8 +112,9 @@ def strike_recorded(analysis) -> bool:
     return bool(i < len(tip) - 1 and tip[i + 1:].min() < STRIKE_END_SHARE * tip[i])
 
 
-def analysis_report(analysis, trial, path) -> dict:
-    """summary() plus what the input was and the tendon's work (if force was recorded)."""
+def analysis_report(analysis, trial, path, parameters=()) -> dict:
+    """summary() plus what the input was and the tendon's work (if force was recorded).
+    ``parameters``: where the analysis took its model parameters from (trial conditions)."""
     report = analysis.summary()
     report['arm_ke_share_at_peak'] = analysis.arm_ke_share_at_peak
     if analysis.tendon_work_mJ is not None:
@@ -121,8 +122,13 @@ def analysis_report(analysis, trial, path) -> dict:
             analysis.tendon_work_mJ[analysis.phases.index_max_contraction])
     report['input'] = {'path': str(path), 'frames': trial.tracks.n_frames,
                        'last_frame_s': float(trial.tracks.time_s[-1]),
-                       'truncated': trial.truncated, 'problems': list(trial.problems)}
+                       'truncated': trial.truncated, 'problems': list(trial.problems),
+                       'parameters': list(parameters)}
     return report
+
+
+def _seconds(value) -> str:
+    return f'{value:.4f} s' if value is not None and math.isfinite(value) else 'not seen'
 
 
 def _print_text(report):
@@ -131,25 +137,30 @@ def _print_text(report):
     lines = [
         f'input            {report["input"]["path"]} ({report["input"]["frames"]} frames)',
         f'peak tip speed   {report["peak_tip_speed_mps"]:.2f} m/s',
-        'phase starts     ' + ', '.join(f'{k} {v:.4f} s' for k, v in phases.items()),
-        f'overcentering    {report["overcentering_s"]:.4f} s',
+        'phase starts     ' + ', '.join(f'{k} {_seconds(v)}' for k, v in phases.items()),
+        f'overcentering    {_seconds(report["overcentering_s"])}',
         f'peak body speed  {report["peak_body_speed_radps"]:.1f} rad/s',
         f'peak arm speed   {report["peak_arm_speed_radps"]:.1f} rad/s (relative to the body)',
         f'max spring energy {report["max_spring_energy_mJ"]:.1f} mJ',
         f'arm share of KE at peak {report["arm_ke_share_at_peak"]:.2f}',
-        f'contact angle    {report["contact_angle_deg"]:.2f} deg',
+        ('contact angle    unknown: θ3 counts from the latch'
+         if report['contact_angle_deg'] is None or not math.isfinite(report['contact_angle_deg'])
+         else f'contact angle    {report["contact_angle_deg"]:.2f} deg'),
         f'body pivot       ({pivot[0]:.3f}, {pivot[1]:.3f}) mm (camera frame, x mirrored '
         'as the authors publish it)',
         f'L1               {report["L1_mm"]:.2f} mm',
     ]
+    if report['input'].get('parameters'):
+        lines.append('parameters       ' + '; '.join(report['input']['parameters']))
     if 'tendon_work_to_IV_mJ' in report:
         lines.append(f'tendon work to IV {report["tendon_work_to_IV_mJ"]:.1f} mJ')
     print('\n'.join(lines))
 
 
 def run_analyze(args) -> int:
-    from .analysis import AnalysisParams, TrackFormatError, analyze_tracks
+    from .analysis import TrackFormatError, analyze_tracks
     from .analysis.bag_input import is_bag_path, load_trial_input
+    from .analysis.conditions import params_for_trial
     from .recording import BagError
 
     bag = is_bag_path(args.path)
@@ -163,14 +174,17 @@ def run_analyze(args) -> int:
         _err('analyze', f'warning: {args.path} is damaged: {"; ".join(trial.problems)}')
         _err('analyze', f'warning: analysing the {trial.tracks.n_frames} frames recorded '
                         f'before the damage (up to t = {last:.4f} s)')
-    params = AnalysisParams()
+    params, parameters = params_for_trial(trial.conditions)
     if trial.force_N is not None:
         params.tendon_force_N, params.tendon_force_time_s = trial.force_N, trial.force_time_s
     try:
         analysis = analyze_tracks(trial.tracks, params)
     except (ValueError, IndexError) as exc:
-        cut = f' (the data end at t = {last:.4f} s)' if trial.truncated else ''
-        _err('analyze', f'{args.path}: analysis failed{cut}: {exc}')
+        if trial.truncated:
+            _err('analyze', f'{args.path}: not enough data before the damage: the data end at '
+                            f't = {last:.4f} s: {exc}')
+        else:
+            _err('analyze', f'{args.path}: analysis failed: {exc}')
         return 1
     if not strike_recorded(analysis):
         why = (f'the data end at t = {last:.4f} s, before the strike is over (the tip speed '
@@ -179,7 +193,7 @@ def run_analyze(args) -> int:
             _err('analyze', f'{args.path}: not enough data before the damage: {why}')
             return 1
         _err('analyze', f'warning: {why}; phase times and peaks are not reliable')
-    report = analysis_report(analysis, trial, args.path)
+    report = analysis_report(analysis, trial, args.path, parameters)
     if args.plot:
         from .analysis.plots import plot_trial
         plot_trial(analysis, args.plot, title=Path(args.path).name)

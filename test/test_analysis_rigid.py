@@ -67,7 +67,7 @@ def test_ml_pivot_on_short_noisy_quantised_arc():
 
 
 def _synthetic_trial(rng, contact_deg=3.0, L1=19.0, marker_axis_deg=6.0, fps=4000.0,
-                     play_mm=(0.0, 0.0)):
+                     play_mm=(0.0, 0.0), return_b=False):
     """Body and arm of physics.md in a left-handed camera frame, with tracker noise.
 
     θ1_cam falls 25° in 0.9 s (loading), the arm sits at the contact angle until 0.5 s, then
@@ -100,7 +100,10 @@ def _synthetic_trial(rng, contact_deg=3.0, L1=19.0, marker_axis_deg=6.0, fps=400
     for name, xy in [('mb1', body[:, 0]), ('mb2', body[:, 1]), ('mb3', body[:, 2]),
                      ('ma1', arm[:, 0]), ('ma2', arm[:, 1])]:
         markers[name] = _tracker(xy, rng) * np.array([1.0, -1.0])   # image y points down
-    return MarkerTracks(time_s=t, frames=np.arange(len(t)), markers_mm=markers), theta1, theta3
+    tracks = MarkerTracks(time_s=t, frames=np.arange(len(t)), markers_mm=markers)
+    if return_b:
+        return tracks, theta1, theta3, b
+    return tracks, theta1, theta3
 
 
 def test_fit_linkage_recovers_pivots_and_angles():
@@ -124,12 +127,14 @@ def test_fit_linkage_keeps_one_pivot_when_the_strike_does_not_move_it():
 
 def test_joint_play_the_linkage_is_fitted_on_the_strike():
     """The body turns about one point while loading and about another, 0.5 mm away, in the
-    strike: the pivot and L1 are those of the strike, the loading pivot is kept, and the body
-    angle follows the rotation in both regimes (as a single fixed pivot would not)."""
+    strike: the pivot and L1 are those of the strike, the loading pivot is kept, the body
+    angle follows the rotation in both regimes (as a single fixed pivot would not), and θ1
+    is the direction of b seen from the strike pivot a, θ3 the arm from that line (the link
+    physics.md's angles are about; with play it turns less than the body while loading)."""
     play = np.array([0.3, 0.4])
     fps = 19000.0
-    tracks, theta1, theta3 = _synthetic_trial(np.random.default_rng(11), fps=fps,
-                                              play_mm=play)
+    tracks, theta1, theta3, b = _synthetic_trial(np.random.default_rng(11), fps=fps,
+                                                 play_mm=play, return_b=True)
     fit, angles = fit_linkage(tracks, arm_axis_offset_rad=math.radians(6.0))
     assert fit.strike_fit
     assert 0.895 < fit.fit_window_s[0] < 0.901 and fit.fit_window_s[1] < 0.92
@@ -139,24 +144,37 @@ def test_joint_play_the_linkage_is_fitted_on_the_strike():
     k = int(round(0.9 * fps))
     b_strike = PIVOT_A + 19.0 * np.array([np.cos(theta1[k]), np.sin(theta1[k])])
     assert fit.L1_mm == pytest.approx(np.linalg.norm(b_strike - pivot2), abs=0.05)
-    for got, true in ((angles.theta1_cam_rad, theta1), (angles.theta3_rad, theta3)):
+    a_to_b = b - pivot2
+    link = np.unwrap(np.arctan2(a_to_b[:, 1], a_to_b[:, 0]))
+    assert np.ptp((link - theta1)[:k]) > np.radians(0.15)      # the play shows while loading
+    for got, true in ((angles.body_angle_rad, theta1), (angles.theta1_cam_rad, link),
+                      (angles.theta3_rad, theta3 + link - theta1)):
         err = np.degrees(got - true)
         err -= np.mean(err)                      # the angles' zero is not under test here
         assert np.sqrt(np.mean(err ** 2)) < 0.25                # per-frame noise ~0.15 deg
         assert abs(np.mean(err[:k]) - np.mean(err[k:])) < 0.05  # the same in both regimes
+    # the link's direction itself, not only its changes: within the pivot's uncertainty
+    assert np.degrees(np.mean(angles.theta1_cam_rad - link)) == pytest.approx(0.0, abs=0.2)
 
 
 def test_contact_angle_needs_the_arm_axis():
     """θ3 is measured from the arm axis (b → tip); the tip is not tracked. With the
-    marker-to-axis angle supplied the contact angle is recovered; without it, it is off by
-    exactly that angle, which no marker-only fit can see."""
+    marker-to-axis angle supplied the contact angle is recovered; taking the outermost marker
+    for the axis, it is off by exactly that angle, which no marker-only fit can see; with
+    neither, θ3 counts from the latch and the contact angle is reported unknown."""
     tracks, _, _ = _synthetic_trial(np.random.default_rng(3), contact_deg=3.0,
                                     marker_axis_deg=6.0)
     known = analyze_tracks(tracks, AnalysisParams(arm_axis_offset_rad=math.radians(6.0)))
     assert known.summary()['contact_angle_deg'] == pytest.approx(3.0, abs=0.15)
+    marker_axis = analyze_tracks(tracks, AnalysisParams(arm_axis_offset_rad=0.0))
+    assert marker_axis.summary()['contact_angle_deg'] == pytest.approx(3.0 - 6.0, abs=0.15)
+    assert marker_axis.L1_mm == pytest.approx(known.L1_mm, abs=1e-9)
     unknown = analyze_tracks(tracks)
-    assert unknown.summary()['contact_angle_deg'] == pytest.approx(3.0 - 6.0, abs=0.15)
-    assert unknown.L1_mm == pytest.approx(known.L1_mm, abs=1e-9)
+    assert math.isnan(unknown.summary()['contact_angle_deg'])
+    latched = unknown.time_s < 0.45
+    assert np.median(unknown.theta3_rad[latched]) == pytest.approx(0.0, abs=math.radians(0.05))
+    np.testing.assert_allclose(unknown.theta3_rad, known.theta3_rad - math.radians(3.0),
+                               atol=math.radians(0.15))
     # A contact angle measured on the rig sets θ3's zero instead (the authors' convention).
     measured = analyze_tracks(tracks, AnalysisParams(contact_angle_rad=math.radians(3.0)))
     assert measured.summary()['contact_angle_deg'] == pytest.approx(3.0, abs=1e-12)

@@ -1,8 +1,11 @@
 """Pivots, link length and joint angles from marker tracks; tip speed from joint rates.
 
-θ1 is the body's rotation in the camera and θ3 the arm's rotation relative to the body, each
-measured as rotation about the pivot of its regime (below); the pivots also set the constant
-offsets of θ1 and θ3 and the length L1 (see :func:`fit_linkage`).
+θ1 is the angle of the link a–b (physics.md): the direction of the arm pivot b seen from the
+fitted body pivot a; θ3 the arm axis's angle to that line. The body's rigid rotation, measured
+about the pivot of its regime (below), is kept alongside (``JointAngles.body_angle_rad``): with
+joint play the link turns less than the body while the body turns about another point than a.
+The pivots also set the constant offsets of θ1 and θ3 and the length L1 (see
+:func:`fit_linkage`).
 
 **Where the pivots are fitted: on the strike.** The joint has play. On the reference trial the
 body's centre of rotation during the strike (phase IV and the body's rebound) lies 0.5 mm from
@@ -15,20 +18,21 @@ strike frames: from the start of phase IV (the body turns round at maximum sprin
 until the body's rebound has died down below ``STRIKE_SPEED_SHARE`` of its peak angular speed.
 The pivot of the loading frames is kept (``LinkageFit.loading_pivot_mm``) and used for the body
 angle before the strike. When the strike is not resolved (too few frames, too little rotation,
-no strike in the tracks) or does not turn about a significantly different point
-(:func:`pivot_moved`), one pivot is fitted on all frames.
+no strike in the tracks), the frames before it turn too little to pin a pivot of their own, or
+the strike does not turn about a significantly different point (:func:`pivot_moved`), one
+pivot is fitted on all frames.
 
 Conventions (those of physics.md, in a right-handed frame):
 - The tracking frame is left-handed (image y down); y is negated once, before any fit. That
   right-handed frame is the model's frame when the camera's x axis runs from the body pivot
   towards the tendon guide (the simulated camera's convention, and the authors' θ1).
-- θ1_cam: direction of the body link a→b (body pivot to arm pivot), counter-clockwise from
-  the camera's +x axis. It differs from the model's θ1 by the direction of the guide hole, the
+- θ1_cam: direction of the link a→b (body pivot to arm pivot), counter-clockwise from the
+  camera's +x axis. It differs from the model's θ1 by the direction of the guide hole, the
   model's x axis (see ``energy.model_theta1``). Loading turns the body clockwise (θ1 falls),
   the strike counter-clockwise.
-- θ3: counter-clockwise angle from the arm axis (b → tip) to the body link (b → a). θ3 = 0 is
-  the arm folded onto the body; the arm opens with θ3 rising. The tip is not tracked, so the
-  arm axis is taken as b → the arm marker farthest from b, plus an optional fixed offset
+- θ3: counter-clockwise angle from the arm axis (b → tip) to the link (b → a). θ3 = 0 is the
+  arm folded onto the link; the arm opens with θ3 rising. The tip is not tracked, so the arm
+  axis is taken as b → the arm marker farthest from b, plus an optional fixed offset
   ``arm_axis_offset_rad`` = counter-clockwise angle (right-handed frame) from the b → tip line
   to the b → outermost-marker line, an arm constant the markers cannot reveal.
 """
@@ -50,7 +54,13 @@ from .geometry import (
     signed_angle,
     template_point,
 )
-from .smoothing import angle_noise_rad, full_window, smooth_angle
+from .smoothing import (
+    angle_noise_rad,
+    full_window,
+    linear_rate_noise,
+    local_poly_fit,
+    smooth_angle,
+)
 from .tracking import MarkerTracks
 
 # The strike window ends when the body's angular speed has fallen below this share of its peak
@@ -74,12 +84,13 @@ class LinkageFit:
     L1_mm: float
     body_fit_rms_mm: float           # RMS marker residual of 'body rotates about a' (fit window)
     arm_fit_rms_mm: float            # same for the arm about b, in the body frame
-    angle_noise_floor_rad: float     # quantisation floor for the joint angles
+    angle_noise_floor_rad: float     # quantisation floor for the arm angle θ3
     fit_window_s: tuple[float, float] = (float('nan'), float('nan'))
     strike_fit: bool = False         # pivots fitted on the strike (else on all frames)
     # Body pivot fitted on the frames before the strike (camera frame as recorded), NaN if
     # there is no strike; its distance from body_pivot_mm shows the joint's play.
     loading_pivot_mm: np.ndarray | None = None
+    body_noise_floor_rad: float = 0.0    # quantisation floor for the body angle θ1
 
 
 @dataclass
@@ -142,7 +153,8 @@ def strike_window(time_s: np.ndarray, body_angle_rad: np.ndarray, noise_floor_ra
     dt_s = float(np.median(np.diff(time_s)))
     i_peak = ph.strike_index(omega, full_window(half))
     try:
-        t_iv, _ = ph.max_contraction(time_s, omega, sigma / ((2 * half + 1) * dt_s), i_peak)
+        t_iv, _ = ph.max_contraction(time_s, omega, linear_rate_noise(sigma, half, dt_s), i_peak,
+                                     ph.loading_rate(time_s, body_angle_rad, i_peak))
     except (ValueError, IndexError):
         return None
     i_start = int(np.searchsorted(time_s, t_iv))
@@ -213,6 +225,13 @@ def _body_fit(body: np.ndarray, time_s: np.ndarray, sigma_xy: float, speed_share
     strike = _fixed_pivot(body[window])
     loading = None
     if window.start >= MIN_STRIKE_FRAMES:
+        if np.ptp(pooled_angle[:window.start]) < MIN_STRIKE_ROTATION_RAD:
+            # The frames before the strike turn too little to pin a pivot of their own (a
+            # camera window that starts late in the loading): play cannot be told from
+            # a poorly fixed loading pivot, and one pivot for all frames is the better fit
+            # (the strike's arc alone pins the pivot along the body poorly: its sagitta is
+            # about a pixel).
+            return pooled, None, pooled_angle, slice(None)
         try:
             loading = _fixed_pivot(body[:window.start])
         except ValueError:                  # the body did not turn before the strike
@@ -226,6 +245,30 @@ def _body_fit(body: np.ndarray, time_s: np.ndarray, sigma_xy: float, speed_share
         n = min(MIN_STRIKE_FRAMES, window.start)
         angle[pre] = before + np.mean(angle[window.start - n:window.start] - before[-n:])
     return strike, loading, angle, window
+
+
+# The body pose that carries the arm's centre: a local quintic through this many frames either
+# side (the body turns at most ~5 mrad a frame in a strike: the fit follows it).
+BODY_POSE_HALF_WIDTH = 6
+
+
+def _smoothed_body_point(centroid: np.ndarray, angle_rad: np.ndarray, point: np.ndarray,
+                         ) -> np.ndarray:
+    """Camera position per frame of a body-template point, from a smoothed body pose."""
+    if len(angle_rad) > 2 * BODY_POSE_HALF_WIDTH + 1:
+        angle_rad = local_poly_fit(angle_rad, 1.0, BODY_POSE_HALF_WIDTH)[0]
+        centroid = np.column_stack([local_poly_fit(centroid[:, k], 1.0,
+                                                   BODY_POSE_HALF_WIDTH)[0] for k in range(2)])
+    return centroid + rotate(np.broadcast_to(point, centroid.shape), angle_rad)
+
+
+def _rotation_about_moving(centre: np.ndarray, offsets: np.ndarray, points: np.ndarray,
+                           ) -> np.ndarray:
+    """Least-squares rotation (unwrapped) of markers ≈ centre_k + R(φ_k) offsets."""
+    v = points - centre[:, None, :]
+    cross = np.sum(offsets[None, :, 0] * v[..., 1] - offsets[None, :, 1] * v[..., 0], axis=1)
+    dot = np.sum(offsets[None, :, 0] * v[..., 0] + offsets[None, :, 1] * v[..., 1], axis=1)
+    return np.unwrap(np.arctan2(cross, dot))
 
 
 def fit_linkage(tracks: MarkerTracks, arm_axis_offset_rad: float = 0.0,
@@ -243,9 +286,9 @@ def fit_linkage(tracks: MarkerTracks, arm_axis_offset_rad: float = 0.0,
        (rotation about the right centre is unbiased and less noisy than the Kabsch angle);
     5. arm markers in the body frame (body angle, marker centroid); the arm pivot b = the
        fixed point of the arm's motion relative to the body, on the same frames as a; arm
-       angle = rotation about b;
-    6. L1 = |a − b| in the body frame; θ1_cam = direction of a→b turned with the body;
-       θ3 = angle from the arm axis to b→a, turned by the arm's relative rotation.
+       angle = rotation about b, placed in the camera by the (lightly smoothed) body pose;
+    6. L1 = |a − b| in the body frame; θ1_cam = direction of b (carried by the body's pose)
+       seen from a; θ3 = angle from the arm axis to b→a.
     """
     tracks.validate()
     body = _right_handed(tracks, tracks.body_markers)
@@ -258,8 +301,12 @@ def fit_linkage(tracks: MarkerTracks, arm_axis_offset_rad: float = 0.0,
 
     arm_in_body = rotate(arm - body_c[:, None, :], -body_rot)   # body-template coordinates
     b = _fixed_pivot(arm_in_body[fit_on])
-    # In the gauge of b.offsets: arm markers ≈ b + R(arm_rot) offsets (body frame).
-    arm_rot = rotation_about(b.point, b.point + b.offsets, arm_in_body)
+    # In the gauge of b.offsets: arm markers ≈ b + R(arm_rot) offsets (body frame), i.e.
+    # b_cam + R(body_rot + arm_rot) offsets in the camera. The arm's rotation is measured
+    # about b where a lightly smoothed body pose puts it: the body's pose noise would
+    # otherwise move the centre and add half as much again to the arm's angle noise.
+    b_cam = _smoothed_body_point(body_c, body_rot, b.point)
+    arm_rot = _rotation_about_moving(b_cam, b.offsets, arm) - body_rot
 
     a_tpl = template_point(a.point, body_rot[fit_on], body_c[fit_on])
     link = b.point - a_tpl                             # a → b, body-template coordinates
@@ -276,8 +323,8 @@ def fit_linkage(tracks: MarkerTracks, arm_axis_offset_rad: float = 0.0,
     theta3 = (signed_angle(axis0, -link) - (arm_rot - arm_rot[0]) + arm_axis_offset_rad
               + theta1_cam - body_angle)
 
-    floor = (sigma_xy / np.sqrt(np.sum(a.offsets ** 2))
-             + sigma_xy / np.sqrt(np.sum(b.offsets ** 2)))
+    body_floor = sigma_xy / np.sqrt(np.sum(a.offsets ** 2))
+    floor = body_floor + sigma_xy / np.sqrt(np.sum(b.offsets ** 2))
     fit = LinkageFit(
         body_pivot_mm=_to_camera(tracks, a.point),
         arm_pivot_body_mm=rotate(link[None, :], body_rot[:1])[0],
@@ -286,7 +333,8 @@ def fit_linkage(tracks: MarkerTracks, arm_axis_offset_rad: float = 0.0,
         fit_window_s=(float(t[fit_on][0]), float(t[fit_on][-1])),
         strike_fit=fit_on != slice(None),
         loading_pivot_mm=(_to_camera(tracks, loading.point) if loading is not None
-                          else np.full(2, np.nan)))
+                          else np.full(2, np.nan)),
+        body_noise_floor_rad=float(body_floor))
     return fit, JointAngles(t, theta1_cam, theta3, body_angle)
 
 

@@ -53,8 +53,20 @@ def strike_index(omega1_radps: np.ndarray, valid: np.ndarray | None = None) -> i
     return int(np.argmax(np.where(valid, omega1_radps, -np.inf)))
 
 
+def loading_rate(t: np.ndarray, theta1_rad: np.ndarray, i_strike: int,
+                 span_s: float = 0.1, gap_s: float = 0.01) -> float:
+    """θ̇1 at the end of loading: the least-squares slope of θ1 over ``span_s`` ending
+    ``gap_s`` before the strike (NaN if there are too few frames). A long baseline: the
+    slow loading moves a marker by a pixel only every few tens of ms."""
+    lo, hi = np.searchsorted(t, [t[i_strike] - span_s - gap_s, t[i_strike] - gap_s])
+    if hi - lo < 3:
+        return float('nan')
+    return float(np.polyfit(t[lo:hi] - t[hi - 1], theta1_rad[lo:hi], 1)[0])
+
+
 def max_contraction(t: np.ndarray, omega1_radps: np.ndarray, omega1_noise_radps: np.ndarray,
-                    i_strike: int) -> tuple[float, int]:
+                    i_strike: int, loading_rate_radps: float = float('nan'),
+                    ) -> tuple[float, int]:
     """Start of phase IV: the upward zero crossing of θ̇1 just before the strike.
 
     A noisy zero crossing is located with a symmetric hysteresis band ±b, b =
@@ -62,6 +74,12 @@ def max_contraction(t: np.ndarray, omega1_radps: np.ndarray, omega1_noise_radps:
     first exit above +b after it, each interpolated between frames; the crossing is their
     midpoint. If the body rests a while at maximum contraction (θ̇1 ≈ 0 for some ms), this is
     the centre of the rest; if it turns round at once, it is the crossing itself.
+
+    That needs the loading to be resolved up to the turn. Where the band between the two
+    exits is wider than the loading rate (``loading_rate_radps``, :func:`loading_rate`; coarse
+    pixels, slow loading), the apparent rest is only loading too slow to see, and the midpoint
+    would fall far before the turn; then the crossing is extrapolated back from the rising
+    side: the tangent of θ̇1 where it leaves the band, followed down to θ̇1 = 0.
     """
     band = DETECTION_SIGMAS * omega1_noise_radps
     loading = np.nonzero(omega1_radps[:i_strike] < -band[:i_strike])[0]
@@ -72,8 +90,42 @@ def max_contraction(t: np.ndarray, omega1_radps: np.ndarray, omega1_noise_radps:
     rising = np.nonzero(omega1_radps[i_neg:i_strike + 1] > band[i_neg:i_strike + 1])[0]
     i_pos = i_neg + int(rising[0])
     t_pos = _interp_crossing(t, omega1_radps - band, i_pos - 1)
-    t_iv = 0.5 * (t_neg + t_pos)
-    return t_iv, int(np.argmin(np.abs(t - t_iv)))
+    if not np.mean(band[i_neg:i_pos + 1]) >= abs(loading_rate_radps):
+        t_iv = 0.5 * (t_neg + t_pos)          # resolved (or no loading rate to judge by)
+    else:
+        hi = min(i_pos + 1, len(t) - 1)
+        slope = (omega1_radps[hi] - omega1_radps[i_pos - 1]) / (t[hi] - t[i_pos - 1])
+        b = float(np.interp(t_pos, t[i_pos - 1:i_pos + 1], band[i_pos - 1:i_pos + 1]))
+        t_iv = max(t_neg, t_pos - b / slope) if slope > 0 else t_pos
+    return float(t_iv), int(np.argmin(np.abs(t - t_iv)))
+
+
+def peak_time_and_value(t: np.ndarray, values: np.ndarray, i: int) -> tuple[float, float]:
+    """Sub-frame maximum near sample i: the vertex of the parabola through i−1, i, i+1."""
+    if i <= 0 or i >= len(values) - 1:
+        return float(t[i]), float(values[i])
+    y0, y1, y2 = values[i - 1], values[i], values[i + 1]
+    curvature = y0 - 2.0 * y1 + y2
+    if not curvature < 0.0:
+        return float(t[i]), float(y1)
+    shift = 0.5 * (y0 - y2) / curvature
+    dt = 0.5 * (t[i + 1] - t[i - 1])
+    return float(t[i] + shift * dt), float(y1 - 0.25 * (y0 - y2) * shift)
+
+
+def loading_under_way(t: np.ndarray, theta1_rad: np.ndarray, noise_rad: float,
+                      span_s: float = 0.1) -> bool:
+    """True if θ1 already turns clearly over the first ``span_s`` of the frames: the recording
+    began during the loading (a camera window around the release), so its start is not seen.
+    The slope of a least-squares line, against its noise (white noise of the larger of
+    ``noise_rad`` and the line's residual)."""
+    n = int(np.searchsorted(t, t[0] + span_s))
+    if n < 10:
+        return False
+    coef, resid, *_ = np.polyfit(t[:n] - t[0], theta1_rad[:n], 1, full=True)
+    sigma = max(noise_rad, float(np.sqrt(resid[0] / n)) if len(resid) else 0.0)
+    slope_noise = sigma * np.sqrt(12.0 / (n ** 3 - n)) / float(np.median(np.diff(t[:n])))
+    return bool(abs(coef[0]) > DETECTION_SIGMAS * slope_noise)
 
 
 def loading_start(t: np.ndarray, theta1_s: np.ndarray, threshold_rad: float, i_end: int,

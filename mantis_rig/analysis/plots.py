@@ -18,6 +18,8 @@ def _phase_masks(a: TrialAnalysis) -> dict[str, np.ndarray]:
     p, t = a.phases, a.time_s
     edges = [p.loading_start_s, p.unlatch_s, p.overcentering_s, p.max_contraction_s,
              p.peak_tip_speed_s]
+    if not np.isfinite(edges[0]):          # the recording began during the loading
+        edges[0] = float(t[0])
     if not np.isfinite(edges[2]):
         edges[2] = edges[1]
     return {name: (t >= lo) & (t <= hi)

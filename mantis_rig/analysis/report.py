@@ -15,8 +15,14 @@ from .energy import (
     tendon_length_mm,
     tendon_work_mJ,
 )
-from .kinematics import LinkageFit, fit_linkage, tip_speed_mps
-from .smoothing import angle_noise_rad, smooth_angle
+from .kinematics import MIN_STRIKE_ROTATION_RAD, LinkageFit, fit_linkage, tip_speed_mps
+from .smoothing import (
+    STRIKE_POLY,
+    angle_noise_rad,
+    linear_rate_noise,
+    local_poly_fit,
+    smooth_angle,
+)
 from .tracking import MIN_FRAMES, MarkerTracks, TrackFormatError
 
 
@@ -36,13 +42,22 @@ class AnalysisParams:
     # in the authors' published θ1 (it starts at 2.31 rad on the reference trial).
     guide_direction_cam_rad: float | None = 0.0
     theta1_start_rad: float | None = None
-    # Counter-clockwise angle (right-handed frame) from the b→tip line to the
-    # b→outermost-arm-marker line: an arm constant, not visible to the camera.
-    arm_axis_offset_rad: float = 0.0
-    # The latched contact angle measured on the rig (shim), if known: θ3 is then offset so its
-    # latched level equals it (the authors' convention: relative θ3 plus a per-trial θ3
-    # initial value), instead of relying on arm_axis_offset_rad.
+    # θ3's zero. The camera sees the arm's rotation, not the direction of its axis (b → tip:
+    # the tip is not tracked), so θ3 is known up to a constant. In order of precedence:
+    # - contact_angle_rad: the latched contact angle measured on the rig (shim): θ3's
+    #   latched level is set to it (physics.md: the arm rests at θ3 = φc);
+    # - arm_axis_offset_rad: counter-clockwise angle (right-handed frame) from the b→tip line
+    #   to the b→outermost-arm-marker line, an arm constant: θ3 is then absolute, and the
+    #   contact angle is measured;
+    # - neither: θ3 counts from the latch (zero while latched; contact angle reported NaN).
+    #   This is the authors' θ3 (their series start at 0 with the contact angle kept aside).
     contact_angle_rad: float | None = None
+    arm_axis_offset_rad: float | None = None
+    # L1 of the tendon geometry (overcentering, tendon length): the camera sees neither the
+    # attachment c nor the guide d, so L2, β and d_t are the design's, and so is the L1 they
+    # are laid out with (physics.md: 19 mm). None: the fitted L1 instead. Tip speed and
+    # kinetic energy use the fitted L1.
+    tendon_L1_mm: float | None = 19.0
     # Frame of summary()['body_pivot_mm']: 'x_mirrored' (the tracker's x negated: the frame of
     # the published reference pivot), 'tracker' (as recorded) or 'right_handed' (y negated
     # for a left-handed tracker: the analysis and model frame).
@@ -51,6 +66,9 @@ class AnalysisParams:
     # Smoothing: relative velocity precision and the widest window.
     rel_precision: float = 0.02
     max_window_s: float = 0.02
+    # The strike's polynomial fits reach this share of the time from the start of IV to the
+    # peak tip speed either side of a frame.
+    strike_window_share: float = 1.0 / 7.0
     # Optional tendon force samples (N) with their own time base (s).
     tendon_force_N: np.ndarray | None = None
     tendon_force_time_s: np.ndarray | None = None
@@ -73,6 +91,8 @@ class TrialAnalysis:
     L1_mm: float
     contact_angle_rad: float
     overcentering_trajectory_s: float
+    peak_tip_speed: float = float('nan')         # m/s, at the sub-frame maximum
+    strike_half_width: int = 0                  # frames, of the strike's polynomial fits
     linkage: LinkageFit | None = None
     body_pivot_mm: np.ndarray | None = None     # in AnalysisParams.pivot_frame
 
@@ -88,11 +108,12 @@ class TrialAnalysis:
         pivot = (self.body_pivot_mm.tolist() if self.body_pivot_mm is not None
                  else [float('nan'), float('nan')])
         return {
-            'peak_tip_speed_mps': float(self.tip_speed_mps[p.index_peak]),
+            'peak_tip_speed_mps': self.peak_tip_speed,
             'max_spring_energy_mJ': float(np.max(self.spring_energy_mJ)),
             'phase_start_s': {'I': p.loading_start_s, 'II': p.unlatch_s,
                               'III': p.overcentering_s, 'IV': p.max_contraction_s},
             'overcentering_s': p.overcentering_s,
+            'peak_tip_speed_s': p.peak_tip_speed_s,
             'peak_body_speed_radps': float(np.max(self.omega1_radps[strike])),
             'peak_arm_speed_radps': float(np.max(self.omega3_radps[strike])),
             'contact_angle_deg': math.degrees(self.contact_angle_rad),
@@ -104,11 +125,14 @@ class TrialAnalysis:
 def analyze_tracks(tracks: MarkerTracks, params: AnalysisParams | None = None) -> TrialAnalysis:
     """Fit the linkage to marker tracks, then run :func:`analyze_angles` on its angles."""
     params = params or AnalysisParams()
-    linkage, angles = fit_linkage(tracks, params.arm_axis_offset_rad)
+    offset = params.arm_axis_offset_rad
+    linkage, angles = fit_linkage(tracks, 0.0 if offset is None else offset)
     theta1 = model_theta1(angles.theta1_cam_rad, params.theta1_start_rad,
                           params.guide_direction_cam_rad)
+    body = theta1 + (angles.body_angle_rad - angles.theta1_cam_rad)
     result = _analyze(angles.time_s, theta1, angles.theta3_rad, linkage.L1_mm, params,
-                      linkage.angle_noise_floor_rad)
+                      linkage.angle_noise_floor_rad, body_raw=body,
+                      body_floor_rad=linkage.body_noise_floor_rad)
     result.linkage = linkage
     result.body_pivot_mm = pivot_in_frame(linkage.body_pivot_mm, tracks.handedness,
                                           params.pivot_frame)
@@ -138,34 +162,71 @@ def analyze_angles(time_s: np.ndarray, theta1_rad: np.ndarray, theta3_rad: np.nd
     if len(time_s) < MIN_FRAMES:
         raise TrackFormatError(f'too few frames: {len(time_s)} (need at least {MIN_FRAMES})')
     return _analyze(time_s, np.asarray(theta1_rad, float), np.asarray(theta3_rad, float),
-                    L1_mm, params or AnalysisParams(), noise_floor_rad)
+                    L1_mm, params or AnalysisParams(), noise_floor_rad, absolute_theta3=True)
 
 
 def _analyze(t: np.ndarray, theta1_raw: np.ndarray, theta3_raw: np.ndarray, L1_mm: float,
-             params: AnalysisParams, noise_floor_rad: float) -> TrialAnalysis:
-    sig1 = angle_noise_rad(theta1_raw, noise_floor_rad)
+             params: AnalysisParams, noise_floor_rad: float, absolute_theta3: bool = False,
+             body_raw: np.ndarray | None = None, body_floor_rad: float | None = None,
+             ) -> TrialAnalysis:
+    """``theta1_raw``: the link angle (direction a → b), ``theta3_raw`` the arm from that
+    line; ``body_raw``: the body's rigid rotation (the spring's twist), equal to θ1 where the
+    body turns about a (None: equal everywhere, no joint play). Phases that are about the body
+    itself (loading, maximum spring contraction) and about the arm resting on it (the latch)
+    use the body's rotation; the tendon geometry and the tip use the link angle.
+    ``noise_floor_rad``: quantisation floor of θ3 (``body_floor_rad`` of θ1, default the same).
+    """
+    dt_s = float(np.median(np.diff(t)))
+    floor1 = noise_floor_rad if body_floor_rad is None else body_floor_rad
+    sig1 = angle_noise_rad(theta1_raw, floor1)
     sig3 = angle_noise_rad(theta3_raw, noise_floor_rad)
     th1, w1, h1 = smooth_angle(t, theta1_raw, sig1, params.rel_precision, params.max_window_s)
     th3, w3, h3 = smooth_angle(t, theta3_raw, sig3, params.rel_precision, params.max_window_s)
+    if body_raw is None:
+        body_raw = theta1_raw
+        body, w_body, h_body, sig_body = th1, w1, h1, sig1
+    else:
+        sig_body = angle_noise_rad(body_raw, floor1)
+        body, w_body, h_body = smooth_angle(t, body_raw, sig_body, params.rel_precision,
+                                            params.max_window_s)
+    play = th1 - body               # slow: the link turns less than the body while loading
+    arm_on_body = th3 - play        # the arm relative to the body: constant while latched
 
-    i_strike = ph.strike_index(w1)
-    dt_s = float(np.median(np.diff(t)))
-    t_iv, i_iv = ph.max_contraction(t, w1, sig1 / ((2 * h1 + 1) * dt_s), i_strike)
+    i_strike = ph.strike_index(w_body)
+    t_iv, i_iv = ph.max_contraction(t, w_body, linear_rate_noise(sig_body, h_body, dt_s),
+                                    i_strike, ph.loading_rate(t, body_raw, i_strike))
+    turned = float(np.max(body[i_iv:]) - body[i_iv])
+    if turned < MIN_STRIKE_ROTATION_RAD:
+        raise ValueError(f'no strike: after its slowest point (t = {t_iv:.4f} s) the body '
+                         f'turns back by {turned:.3g} rad only')
+    strike_k = _strike_rates(t, theta1_raw, theta3_raw, th1, th3, w1, w3, i_iv, L1_mm,
+                             params)
     # Level thresholds use the per-frame noise: a marker settling across a quantisation
     # boundary is a real sub-pixel step that averaging does not remove.
-    thr1 = ph.LEVEL_SIGMAS * sig1
+    thr_body = ph.LEVEL_SIGMAS * sig_body
     thr3 = ph.LEVEL_SIGMAS * sig3
-    t_load = ph.loading_start(t, th1, thr1, i_iv, int(np.max(h1)))
-    i_load = int(np.searchsorted(t, t_load))
-    t_unlatch = ph.unlatch_time(t, th3, thr3, i_load, i_iv)
+    if ph.loading_under_way(t, body_raw, sig_body):
+        t_load, i_load = float('nan'), 0          # began before the first frame
+    else:
+        t_load = ph.loading_start(t, body, thr_body, i_iv, int(np.max(h_body)))
+        i_load = int(np.searchsorted(t, t_load))
+    t_unlatch = ph.unlatch_time(t, arm_on_body, thr3, i_load, i_iv)
     i_unlatch = int(np.searchsorted(t, t_unlatch))
-    contact = float(np.median(th3[i_load:i_unlatch + 1]))
+    # θ3's latched level: the arm rests on the body, a constant angle to it; to the link it
+    # is that angle in the rest pose, where loading starts (while loading, the link turns
+    # less than the body if the joint has play, and the arm with the body).
+    contact = float(np.median(arm_on_body[i_load:i_unlatch + 1]) + play[i_load])
     if params.contact_angle_rad is not None:
         th3 = th3 + (params.contact_angle_rad - contact)
         contact = float(params.contact_angle_rad)
+    elif params.arm_axis_offset_rad is None and not absolute_theta3:
+        th3 = th3 - contact
+        contact = float('nan')
     tip = tip_speed_mps(L1_mm, params.L3_mm, th3, w1, w3)
     i_peak = ph.peak_after(tip, i_iv)
-    residual = ph.overcentering_residual(th1, th3, L1_mm, params.beta_rad, params.d_t_mm)
+    t_peak, v_peak = ph.peak_time_and_value(t, tip, i_peak)
+    tendon_L1 = L1_mm if params.tendon_L1_mm is None else params.tendon_L1_mm
+    residual = ph.overcentering_residual(th1, th3, tendon_L1, params.beta_rad, params.d_t_mm)
     t_oc = ph.geometric_overcentering(t, residual, i_unlatch, i_iv + 1)
     t_knee = (ph.trajectory_knee_time(t, th1, th3, i_unlatch, i_iv)
               if i_iv - i_unlatch > 20 else float('nan'))
@@ -174,15 +235,36 @@ def _analyze(t: np.ndarray, theta1_raw: np.ndarray, theta3_raw: np.ndarray, L1_m
     work = None
     if params.tendon_force_N is not None:
         force = np.interp(t, params.tendon_force_time_s, params.tendon_force_N)
-        lt = tendon_length_mm(th1, th3, L1_mm, params.L2_mm, params.beta_rad, params.d_t_mm)
+        lt = tendon_length_mm(th1, th3, tendon_L1, params.L2_mm, params.beta_rad,
+                              params.d_t_mm)
         work = tendon_work_mJ(force, lt)
 
-    times = ph.PhaseTimes(t_load, t_unlatch, t_oc, t_iv, float(t[i_peak]), i_iv, i_peak)
+    times = ph.PhaseTimes(t_load, t_unlatch, t_oc, t_iv, t_peak, i_iv, i_peak)
     return TrialAnalysis(
         time_s=t, theta1_rad=th1, theta3_rad=th3, omega1_radps=w1, omega3_radps=w3,
         tip_speed_mps=tip,
-        spring_energy_mJ=spring_energy_mJ(th1, params.k_s_Nmm_per_rad, params.theta1_rest_rad),
+        spring_energy_mJ=spring_energy_mJ(body, params.k_s_Nmm_per_rad,
+                                          params.theta1_rest_rad),
         ke_body_mJ=ke_body, ke_arm_mJ=ke_arm, overcentering_residual_mm=residual,
         tendon_work_mJ=work, phases=times, L1_mm=float(L1_mm), contact_angle_rad=contact,
-        overcentering_trajectory_s=t_knee,
+        overcentering_trajectory_s=t_knee, peak_tip_speed=v_peak, strike_half_width=strike_k,
     )
+
+
+def _strike_rates(t, theta1_raw, theta3_raw, th1, th3, w1, w3, i_iv, L1_mm, params) -> int:
+    """Replace the smoothed angles and rates of the strike (in place) by local polynomial fits
+    (:func:`smoothing.strike_half_width`): from the start of IV to as far past the peak tip
+    speed as the peak lies after the start. Returns the half-width used (0: none)."""
+    dt_s = float(np.median(np.diff(t)))
+    i_peak = ph.peak_after(tip_speed_mps(L1_mm, params.L3_mm, th3, w1, w3), i_iv)
+    stop = min(len(t), i_peak + max(i_peak - i_iv, 1) + 1)
+    region = slice(i_iv, stop)
+    if stop - i_iv < 2 * STRIKE_POLY or len(t) < 8 * STRIKE_POLY:
+        return 0
+    k = max(STRIKE_POLY // 2 + 2, int(round(params.strike_window_share * (i_peak - i_iv))))
+    k = min(k, (len(t) - 1) // 2 - 1)
+    for raw, smooth, rate in ((theta1_raw, th1, w1), (theta3_raw, th3, w3)):
+        fitted, fitted_rate = local_poly_fit(raw, dt_s, k)
+        smooth[region] = fitted[region]
+        rate[region] = fitted_rate[region]
+    return k

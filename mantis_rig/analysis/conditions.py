@@ -1,0 +1,70 @@
+"""Analysis parameters from what a trial bag says about its trial (``trial_conditions``).
+
+A bag recorded by the supervisor names the scene it was run with (simulated rig) and the
+conditions set for the trial: the tendon guide distance ``d_t_mm`` and the contact angle
+``contact_angle_deg`` (the shim, measured on the rig). The scene, if mantis_sim knows it,
+gives the mechanism's geometry, spring, inertia and the camera's view; the conditions, which
+are what the trial was run with, override the scene's d_t and contact angle. A bag without
+them (an imported tracking file) keeps the physics.md reference values of AnalysisParams.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+import math
+
+from .energy import InertiaParams
+from .report import AnalysisParams
+
+
+def _number(conditions: dict, key: str) -> float | None:
+    try:
+        value = float(conditions[key])
+    except (KeyError, TypeError, ValueError):
+        return None
+    return value if math.isfinite(value) else None
+
+
+def scene_of(conditions: dict):
+    """The mantis_sim scene the trial names, or None (no scene, or one mantis_sim lacks)."""
+    name = str(conditions.get('scene') or '')
+    if not name:
+        return None
+    try:
+        from mantis_sim.scene import load_scene
+        return load_scene(name)
+    except Exception:               # a rig description, an unknown or broken scene
+        return None
+
+
+def params_for_trial(conditions: dict, params: AnalysisParams | None = None
+                     ) -> tuple[AnalysisParams, list[str]]:
+    """(parameters, what was taken from where) for a trial with these conditions."""
+    params = params or AnalysisParams()
+    notes = []
+    scene = scene_of(conditions)
+    if scene is not None:
+        g = scene.geometry
+        params = replace(
+            params, L3_mm=g.L3_mm, L2_mm=g.L2_mm, beta_rad=math.radians(g.beta_deg),
+            d_t_mm=g.d_t_mm, tendon_L1_mm=g.L1_mm,
+            theta1_rest_rad=math.pi + math.radians(g.alpha_deg),
+            k_s_Nmm_per_rad=scene.spring.k_Nmm_per_rad,
+            contact_angle_rad=math.radians(g.contact_angle_deg),
+            # The simulated camera looks at the mechanism's frame with image y flipped: its
+            # x axis runs from the body pivot towards the tendon guide.
+            guide_direction_cam_rad=0.0,
+            inertia=InertiaParams(
+                m1_g=scene.body.mass_g, I1_gmm2=scene.body.inertia_g_mm2,
+                com1_mm=(scene.body.com_x_mm, scene.body.com_y_mm),
+                m2_g=scene.arm.mass_g, I2_gmm2=scene.arm.inertia_g_mm2,
+                com2_mm=(scene.arm.com_x_mm, scene.arm.com_y_mm)))
+        notes.append(f'geometry, spring and inertia of scene {scene.name!r}')
+    d_t = _number(conditions, 'd_t_mm')
+    if d_t is not None:
+        params = replace(params, d_t_mm=d_t)
+        notes.append(f'd_t = {d_t:g} mm (trial conditions)')
+    contact = _number(conditions, 'contact_angle_deg')
+    if contact is not None:
+        params = replace(params, contact_angle_rad=math.radians(contact))
+        notes.append(f'contact angle {contact:g} deg (trial conditions)')
+    return params, notes
