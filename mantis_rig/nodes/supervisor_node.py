@@ -266,11 +266,14 @@ class SupervisorNode(Node):
         super().destroy_node()
 
     def shutdown_trial(self, reason: str = 'supervisor shutting down') -> None:
-        """Abort a running trial and wait (briefly) for its log to close."""
+        """Abort a running trial; wait (briefly) for the log of the last trial to close: a
+        trial that has just reported 'done' may still be closing it."""
         sequence = self.sequence
-        if sequence is not None and sequence.running:
+        if sequence is None:
+            return
+        if sequence.running:
             sequence.abort(reason)
-            sequence.finished.wait(5.0)
+        sequence.finished.wait(5.0)
 
 
 def main(args=None) -> int:
