@@ -19,12 +19,18 @@ from mantis_sim.world import World
 from .interfaces import DeviceError
 from .world_port import WorldPort, WorldTimeout
 
+HOLD_POLL_S = 0.002
+
 
 class WorldRunner:
-    def __init__(self, world: World, real_time_factor: float = 1.0, step_s: float = 0.01):
+    def __init__(self, world: World, real_time_factor: float = 1.0, step_s: float = 0.01,
+                 hold=None):
+        """hold: optional callable; while it returns True the world waits before its next
+        step (back-pressure from the world's consumers, sim_world_node)."""
         self.world = world
         self.real_time_factor = real_time_factor
         self.step_s = step_s
+        self.hold = hold or (lambda: False)
         self.lock = threading.Condition()
         self.failure: BaseException | None = None
         self._stop = threading.Event()
@@ -50,6 +56,10 @@ class WorldRunner:
         wall0, sim0 = time.monotonic(), self.world.time_s
         try:
             while not self._stop.is_set():
+                if self.hold():
+                    self._stop.wait(HOLD_POLL_S)
+                    wall0, sim0 = time.monotonic(), self.world.time_s   # no catch-up burst
+                    continue
                 self.step()
                 if paced:
                     due = wall0 + (self.world.time_s - sim0) / self.real_time_factor

@@ -66,8 +66,10 @@ def subscription_qos(spec: TopicSpec) -> QoSProfile:
 class Recorder:
     """Record ``topics`` on ``node`` into a bag between start(bag) and stop()."""
 
-    def __init__(self, node, topics=TRIAL_TOPICS, callback_group=None):
+    def __init__(self, node, topics=TRIAL_TOPICS, callback_group=None, clock=None):
+        """clock: what stamps each message's log time (default: the node's)."""
         self.node = node
+        self.clock = clock or node.get_clock()
         self.topics = tuple(topics)
         self.callback_group = callback_group
         self.counts: dict[str, int] = {}
@@ -89,7 +91,7 @@ class Recorder:
             bag.add_topic(spec.topic, spec.type_name, spec.offered_qos)
         self.counts = {spec.topic: 0 for spec in self.topics}
         self._bag = bag
-        clock = self.node.get_clock()
+        clock = self.clock
         for spec in self.topics:
             def on_message(data, topic=spec.topic):
                 self._write(topic, data, clock.now().nanoseconds)

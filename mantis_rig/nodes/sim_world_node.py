@@ -15,6 +15,7 @@ from __future__ import annotations
 from collections import deque
 import math
 import sys
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
@@ -29,7 +30,7 @@ from std_msgs.msg import Float64MultiArray
 
 from mantis_rig.hardware.local_world import WorldRunner
 from mantis_rig.nodes.device_node import Param, declare, param_value, time_msg
-from mantis_rig.nodes.executors import run_node
+from mantis_rig.nodes.executors import SideNode, run_node
 from mantis_rig.nodes.ros_world_port import (
     CAMERA_FRAMES_TOPIC,
     CAMERA_REQUEST_TOPIC,
@@ -46,6 +47,7 @@ from mantis_sim.scene import load_scene
 from mantis_sim.world import World
 
 DEFAULT_SCENE = 'air_23mm_rig'
+DAQ_FORCE_TOPIC = '/loadcell/force_block'
 MAX_REQUEST_FRAMES = 200_000
 
 PARAMETERS = (
@@ -57,7 +59,12 @@ PARAMETERS = (
           (0.0, 1000.0)),
     Param('step_s', 0.01, 'simulated time per world step, s', (1e-4, 0.1)),
     Param('force_rate_hz', 20_000.0, 'sample rate of /sim/tendon_force, Hz', (1.0, 2e6)),
+    Param('max_lead_s', 0.05, 'simulated time the world may run ahead of the load cell\'s '
+          '/loadcell/force_block stream while that streams, s (0: no limit)', (0.0, 10.0)),
 )
+# The force stream counts as streaming while its last block is younger than this (wall time):
+# a load cell that stops must not stop the world.
+STREAM_ALIVE_S = 1.0
 
 
 class SimWorldNode(Node):
@@ -90,6 +97,16 @@ class SimWorldNode(Node):
                           clock=RosClock(clock_type=ClockType.STEADY_TIME))
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
+        # Back-pressure: on a busy machine the stack perceives the world late (force blocks
+        # reached the supervisor up to 0.4 s of simulated time late in one process at 1x, and
+        # the camera's buffer missed the strike). The world waits for the force stream instead;
+        # its subscription sits on a lean node of its own, as the supervisor's recorder does.
+        self.max_lead_s = value('max_lead_s')
+        self._daq_end_s: float | None = None
+        self._daq_heard = 0.0
+        self._pacing = SideNode(self, 'pacing')
+        self._pacing.node.create_subscription(Float64MultiArray, DAQ_FORCE_TOPIC,
+                                              self._on_daq_block, 100)
         self.runner = _StepRunner(self.world, value('real_time_factor'), self.step_s, self)
         self.runner.start()
         self.get_logger().info(
@@ -98,7 +115,20 @@ class SimWorldNode(Node):
 
     def destroy_node(self):
         self.runner.stop()
+        self._pacing.close()
         super().destroy_node()
+
+    def _on_daq_block(self, msg: Float64MultiArray) -> None:
+        if len(msg.data) > 2 and msg.layout.dim:
+            self._daq_end_s = msg.data[0] + msg.data[1] * msg.layout.dim[0].size
+            self._daq_heard = time.monotonic()
+
+    def waiting_for_consumers(self) -> bool:
+        """True while the load cell's stream lags the world by more than max_lead_s."""
+        end = self._daq_end_s
+        return (self.max_lead_s > 0 and end is not None
+                and time.monotonic() - self._daq_heard < STREAM_ALIVE_S
+                and self.world.time_s - end > self.max_lead_s)
 
     def _publish_diagnostics(self) -> None:
         with self.runner.lock:
@@ -205,7 +235,7 @@ class _StepRunner(WorldRunner):
 
     def __init__(self, world: World, real_time_factor: float, step_s: float,
                  node: SimWorldNode):
-        super().__init__(world, real_time_factor, step_s)
+        super().__init__(world, real_time_factor, step_s, hold=node.waiting_for_consumers)
         self.node = node
 
     def step(self) -> None:

@@ -28,7 +28,7 @@ from mantis_rig.recording import TRIAL_CONDITIONS, BagWriter
 from mantis_rig.recording.force_block import force_block_from_msg
 from mantis_rig.recording.marker_block import marker_block_from_msg
 
-from .executors import light_executor, run_node
+from .executors import SideNode, light_executor, run_node
 from .recorder import LATCHED, RELIABLE, Recorder
 from .rig_client import RigClient
 from .trial_conditions import PARAMETERS, ConditionError, TrialConditions, check_value
@@ -79,7 +79,11 @@ class SupervisorNode(Node):
         self._state_pub = self.create_publisher(String, '/supervisor/state', LATCHED)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', RELIABLE)
         self.rig = RigClient(self, self._group, self._publish_state)
-        self.recorder = Recorder(self, callback_group=self._group)
+        # The recorder's ~400 messages a second go through a lean node of their own: through
+        # this node's executor (in one process shared with sim_world_node) they reached the
+        # trial 0.1-0.5 s late, and the camera's buffer missed the strike.
+        self._recorder_node = SideNode(self, 'recorder')
+        self.recorder = Recorder(self._recorder_node.node, clock=self.get_clock())
         self.recorder.on_written = self._on_logged
         group = {'callback_group': self._group}
         self.create_service(Trigger, '/supervisor/start_trial', self._on_start, **group)
@@ -263,6 +267,7 @@ class SupervisorNode(Node):
 
     def destroy_node(self):
         self.shutdown_trial()
+        self._recorder_node.close()
         super().destroy_node()
 
     def shutdown_trial(self, reason: str = 'supervisor shutting down') -> None:
