@@ -261,3 +261,16 @@ def test_analyze_bad_paths(tmp_path, capsys):
     (tmp_path / 'empty_dir').mkdir()
     code, _, err = run(capsys, 'analyze', tmp_path / 'empty_dir')
     assert code == 1 and 'not a bag' in err
+
+
+@real_trial
+def test_frames_without_the_strike_are_refused_with_the_reason():
+    """A camera window that missed the strike (only loading in the frames): a clear error,
+    not an index error."""
+    from mantis_rig.analysis.tracking import MarkerTracks
+    tracks = load_tracks(DATA)
+    keep = (tracks.time_s > 1.5) & (tracks.time_s < 2.55)          # phase IV starts at 2.6177
+    loading = MarkerTracks(time_s=tracks.time_s[keep], frames=tracks.frames[keep],
+                           markers_mm={n: xy[keep] for n, xy in tracks.markers_mm.items()})
+    with pytest.raises(ValueError, match='no strike|do not hold the strike'):
+        analyze_tracks(loading)

@@ -88,6 +88,9 @@ def max_contraction(t: np.ndarray, omega1_radps: np.ndarray, omega1_noise_radps:
     i_neg = int(loading[-1])
     t_neg = _interp_crossing(t, omega1_radps + band, i_neg)
     rising = np.nonzero(omega1_radps[i_neg:i_strike + 1] > band[i_neg:i_strike + 1])[0]
+    if len(rising) == 0:
+        raise ValueError('θ̇1 never turns clearly positive after the loading: the frames do '
+                         'not hold the strike (the spring never releases in them)')
     i_pos = i_neg + int(rising[0])
     t_pos = _interp_crossing(t, omega1_radps - band, i_pos - 1)
     if not np.mean(band[i_neg:i_pos + 1]) >= abs(loading_rate_radps):
