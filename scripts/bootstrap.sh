@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Create (or reuse) the project virtual environment .venv with the pinned dependencies and
 # mantis_rig installed in it (editable). Safe to run again: it reinstalls only when
-# requirements.txt, setup.py or the node list changed.
+# requirements.txt, setup.py or the node list changed. With --test, also requirements-test.txt.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -30,4 +30,13 @@ if [ "$(cat "$stamp" 2>/dev/null || true)" != "$wanted" ]; then
   .venv/bin/python -m pip install --quiet --disable-pip-version-check -r requirements.txt
   .venv/bin/python -m pip install --quiet --disable-pip-version-check --no-deps -e .
   echo "$wanted" > "$stamp"
+fi
+if [ "${1:-}" = "--test" ]; then
+  test_stamp=.venv/.mantis-test-installed
+  test_wanted="$(sha256sum requirements-test.txt | cut -d' ' -f1)"
+  if [ "$(cat "$test_stamp" 2>/dev/null || true)" != "$test_wanted" ]; then
+    echo "bootstrap: installing test-only dependencies into .venv" >&2
+    .venv/bin/python -m pip install --quiet --disable-pip-version-check -r requirements-test.txt
+    echo "$test_wanted" > "$test_stamp"
+  fi
 fi
