@@ -277,6 +277,20 @@ class HybridSimulator:
         mode.taut = True
         return (th1, th3, new_w1, new_w3, work, lost)
 
+    def drive_changed(self, t: float) -> None:
+        """The drive was commanded anew at t (the current time): its speed may jump. A
+        compliant tendon takes the jump in its stretch; a taut rigid tendon on a free arm needs
+        an impulse, or goes slack if it would have to push."""
+        mode, s = self.mode, self.state
+        if not (self.model.rigid and mode.taut) or self._constrained(mode):
+            return
+        tg = self.model.mech.tendon(s[0], s[1])
+        stretch_rate = tg.d1 * s[2] + tg.d3 * s[3] - self.model.free_length(t)[1]
+        if stretch_rate < 0.0 and self.model.unilateral:
+            mode.taut = False
+            return
+        self.state = self._retension(mode, t, s)
+
     # --- main loop ------------------------------------------------------------------------------
     def initial_state(self):
         m, scene = self.model, self.scene

@@ -77,14 +77,14 @@ class World:
         """Command the stage from now on (m/s equals mm/ms, the model's unit)."""
         self._drive.command(self._t_ms, float(velocity_m_per_s))
         if self._held is None:
-            self._after_drive_step(self._t_ms)
+            self._sim.drive_changed(self._t_ms)
 
     def move_stage_to(self, position_m: float, speed_m_per_s: float) -> None:
         """Move the stage to position_m at up to speed_m_per_s, ending at rest on the target."""
         target_mm = position_m * 1e3 - self._start_position_mm
         self._drive.move_to(self._t_ms, target_mm, abs(float(speed_m_per_s)))
         if self._held is None:
-            self._after_drive_step(self._t_ms)
+            self._sim.drive_changed(self._t_ms)
 
     def stage_position_m(self) -> float:
         return (self._start_position_mm + self._drive.pulled(self._t_ms)[0]) * 1e-3
@@ -231,21 +231,6 @@ class World:
             self._tension_cache.pop(id(segments[keep_from]), None)
             keep_from += 1
         del segments[:keep_from]
-
-    def _after_drive_step(self, t: float) -> None:
-        """A stop changes the tendon's free-length rate at once. A compliant tendon takes it
-        in its stretch; a taut rigid tendon on a free arm needs an impulse, or goes slack if it
-        would have to push."""
-        sim = self._sim
-        mode, s = sim.mode, sim.state
-        if not (sim.model.rigid and mode.taut) or sim._constrained(mode):
-            return
-        tg = self._mech.tendon(s[0], s[1])
-        stretch_rate = tg.d1 * s[2] + tg.d3 * s[3] - sim.model.free_length(t)[1]
-        if stretch_rate < 0.0 and sim.model.unilateral:
-            mode.taut = False
-            return
-        sim.state = sim._retension(mode, t, s)
 
 
 class _HeldPose:
