@@ -13,6 +13,7 @@ the stage and fires the camera trigger itself, without waiting for the worker.
 from __future__ import annotations
 
 from collections.abc import Callable
+import math
 import threading
 import time
 from typing import Protocol
@@ -26,7 +27,10 @@ FINAL_STATES = ('idle', 'done', 'aborted')
 DEVICE_NODES = ('stage_node', 'loadcell_node', 'camera_node')
 POLL_S = 0.005                   # the worker's control period
 AT_REST_M_PER_S = 1e-6
-SETTLED_S = 0.3                  # a move has ended when the stage rested this long (wall time)
+# A move has ended when the stage rested this long, on the rig's clock: simulated time in
+# simulation, where a slow machine slows the world down and 0.3 s of wall time may show no
+# motion yet (the supervisor then took a move just sent for one already over).
+SETTLED_S = 0.3
 MOVE_ATTEMPTS = 3
 HOMED_WAIT_S = 3.0               # unknown after this long: go on without homing
 QUERY_RETRY_S = 5.0              # an idempotent query unanswered this long is sent again
@@ -98,7 +102,7 @@ class TrialSequence:
         self.start_position_m: float | None = None
         self.pull_start_position_m: float | None = None
         self.return_error_m: float | None = None
-        self._last_motion = time.monotonic()   # wall time the stage was last seen moving
+        self._last_motion = -math.inf           # rig time the stage was last seen moving
         self.trigger_time_s: float | None = None
         self.marker_span_s: tuple[float, float] | None = None
         self.marker_frames = 0
@@ -181,7 +185,7 @@ class TrialSequence:
         previous = self.stage_position_m
         if abs(velocity_m_per_s) >= AT_REST_M_PER_S or previous is None \
                 or abs(position_m - previous) > 1e-6:
-            self._last_motion = time.monotonic()
+            self._last_motion = self.rig.now_s()
         self.stage_position_m, self.stage_velocity_m_per_s = position_m, velocity_m_per_s
         self._stage_updates += 1
         start = self.pull_start_position_m
@@ -307,9 +311,9 @@ class TrialSequence:
         tolerance_m = self.conditions.position_tolerance_mm * 1e-3
         for _ in range(MOVE_ATTEMPTS):
             self.rig.move_to(target_m)
-            commanded = time.monotonic()
+            commanded = self.rig.now_s()
             self._wait(lambda since=commanded: self._at_rest() and SETTLED_S
-                       <= time.monotonic() - max(since, self._last_motion), what)
+                       <= self.rig.now_s() - max(since, self._last_motion), what)
             error_m = self.stage_position_m - target_m
             if abs(error_m) < tolerance_m:
                 break
