@@ -188,3 +188,24 @@ def test_velocity_move_stops_at_the_soft_limit():
     assert not state.moving and state.forward_limit
     # it stops within a world step (10 ms at 2.4 mm/s = 24 um) of the limit, never far beyond
     assert 24.47e-3 < state.position_m <= 24.5e-3 + 30e-6
+
+
+def test_a_move_ends_the_velocity_watchdog_and_arrives_exactly():
+    """A stop, then a move to a position: the soft-limit watchdog of the velocity move is gone
+    (a move's own stop flag must not keep it polling), and the move ends on its target."""
+    import threading
+    scene, world, runner, port = make_rig(real_time_factor=0.0)
+    runner.start()
+    try:
+        with SimStage(port) as stage:
+            start = stage.state().position_m
+            stage.move_at(2.0e-3)
+            port.wait_until(port.now_s() + 0.2, timeout_s=60)
+            stage.stop()
+            stage.move_to(start - 0.5e-3, 2.0e-3, timeout_s=60)
+            watchdogs = [t for t in threading.enumerate() if t.name == 'sim-stage-limits']
+            state = stage.state()
+    finally:
+        runner.stop()
+    assert all(not t.is_alive() for t in watchdogs)
+    assert state.position_m == pytest.approx(start - 0.5e-3, abs=1e-9) and not state.moving

@@ -41,7 +41,8 @@ class SimStage(Stage):
         self._velocity_cmd = 0.0
         self._limit_hit: tuple[bool, bool] = (False, False)
         self._watchdog: threading.Thread | None = None
-        self._stop_watch = threading.Event()
+        self._watchdog_done = threading.Event()   # ends the current limit watchdog
+        self._stop_watch = threading.Event()      # ends the current move
 
     # --- life cycle ----------------------------------------------------------------------
     def open(self) -> None:
@@ -92,6 +93,7 @@ class SimStage(Stage):
 
     def stop(self) -> None:
         self._stop_watch.set()
+        self._watchdog_done.set()
         self._command(0.0)
 
     def state(self) -> StageState:
@@ -135,16 +137,18 @@ class SimStage(Stage):
             self.port.wait_until(self.port.now_s() + POLL_S, remaining)
 
     def _start_watchdog(self, velocity: float) -> None:
-        self._stop_watch.set()
+        # Each watchdog has an event of its own: a move clearing _stop_watch must not revive
+        # a watchdog that was told to end (it would poll the world every ms for ever).
+        self._watchdog_done.set()
         if self._watchdog is not None:
             self._watchdog.join(timeout=1.0)
-        self._stop_watch.clear()
+        done = self._watchdog_done = threading.Event()
         limit = self._limit_towards(velocity)
         direction = 1.0 if velocity > 0 else -1.0
         margin_m = abs(velocity) * POLL_S
 
         def watch():
-            while not self._stop_watch.wait(WALL_POLL_S):
+            while not done.wait(WALL_POLL_S):
                 position, _ = self.port.stage_state()
                 if (limit - position) * direction <= margin_m:
                     self._command(0.0)
