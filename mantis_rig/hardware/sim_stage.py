@@ -64,7 +64,7 @@ class SimStage(Stage):
     # --- motion ---------------------------------------------------------------------------
     def home(self, timeout_s: float = 60.0) -> None:
         self._require_open('home')
-        self._drive_until(HOME_POSITION_M, HOMING_SPEED_M_PER_S, timeout_s, check_limits=False)
+        self._drive_until(HOME_POSITION_M, HOMING_SPEED_M_PER_S, timeout_s)
         self._homed = True
 
     def move_to(self, position_m: float, speed_m_per_s: float, timeout_s: float = 60.0) -> None:
@@ -72,7 +72,7 @@ class SimStage(Stage):
         self.limits.check_position(position_m)
         self.limits.check_speed(speed_m_per_s)
         self._require_homed('move_to')
-        self._drive_until(position_m, abs(speed_m_per_s), timeout_s, check_limits=True)
+        self._drive_until(position_m, abs(speed_m_per_s), timeout_s)
 
     def move_at(self, velocity_m_per_s: float) -> None:
         self._require_open('move_at')
@@ -113,8 +113,7 @@ class SimStage(Stage):
     def _limit_towards(self, velocity: float) -> float:
         return self.limits.max_position_m if velocity > 0 else self.limits.min_position_m
 
-    def _drive_until(self, target_m: float, speed: float, timeout_s: float,
-                     check_limits: bool) -> None:
+    def _drive_until(self, target_m: float, speed: float, timeout_s: float) -> None:
         """Have the world move the stage to target_m (as the controller executes an absolute
         move) and wait until it rests there; a stop() meanwhile ends the move."""
         deadline = time.monotonic() + timeout_s

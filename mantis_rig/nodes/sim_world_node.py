@@ -41,7 +41,7 @@ from mantis_rig.nodes.ros_world_port import (
     STREAM_QOS,
     stage_command_from_msg,
 )
-from mantis_rig.recording.force_block import force_block_to_msg
+from mantis_rig.recording.force_block import force_block_from_msg, force_block_to_msg
 from mantis_rig.recording.marker_block import marker_block_to_msg
 from mantis_sim.scene import load_scene
 from mantis_sim.world import World
@@ -119,9 +119,12 @@ class SimWorldNode(Node):
         super().destroy_node()
 
     def _on_daq_block(self, msg: Float64MultiArray) -> None:
-        if len(msg.data) > 2 and msg.layout.dim:
-            self._daq_end_s = msg.data[0] + msg.data[1] * msg.layout.dim[0].size
-            self._daq_heard = time.monotonic()
+        try:
+            block = force_block_from_msg(msg)
+        except (ValueError, IndexError):      # not a force block: nothing to pace by
+            return
+        self._daq_end_s = (block.t0_ns + block.period_ns * block.forces_n.size) * 1e-9
+        self._daq_heard = time.monotonic()
 
     def waiting_for_consumers(self) -> bool:
         """True while the load cell's stream lags the world by more than max_lead_s."""
