@@ -65,11 +65,50 @@ def run_replay(args) -> int:
             rclpy.shutdown()
 
 
+# ------------------------------------------------------------- trial conditions, by hand
+#: Trial conditions a tracking file does not carry, given on the command line (the rig's
+#: bags carry them in ``trial_conditions``): option -> trial condition.
+CONDITION_OPTIONS = {'d_t_mm': '--d-t-mm', 'contact_angle_deg': '--contact-angle-deg'}
+
+
+def _add_condition_options(parser) -> None:
+    parser.add_argument('--d-t-mm', type=float, metavar='MM',
+                        help='tendon guide distance d_t of the trial (default: the bag\'s '
+                             'trial conditions, else 23 mm)')
+    parser.add_argument('--contact-angle-deg', type=float, metavar='DEG',
+                        help='contact angle measured on the rig for this trial; sets θ3\'s '
+                             'zero (default: the bag\'s trial conditions, else unknown: θ3 '
+                             'counts from the latch)')
+
+
+def given_conditions(args) -> dict:
+    """The trial conditions given as options, checked against their ranges (ConditionError)."""
+    from .nodes.trial_conditions import ConditionError, check_value
+
+    given = {}
+    for name, option in CONDITION_OPTIONS.items():
+        value = getattr(args, name, None)
+        if value is not None:
+            try:
+                check_value(name, value)
+            except ConditionError as exc:
+                raise ConditionError(f'{option}: {exc}') from None
+            given[name] = value
+    return given
+
+
 # ------------------------------------------------------------------------- import-tracking
 def run_import(args) -> int:
     from .analysis import TrackFormatError, analyze_tracks, load_tracks
+    from .analysis.conditions import params_for_trial
     from .analysis.tracking_import import write_tracking_bag
+    from .nodes.trial_conditions import ConditionError
 
+    try:
+        given = given_conditions(args)
+    except ConditionError as exc:
+        _err('import-tracking', exc)
+        return USAGE_ERROR
     try:
         tracks = load_tracks(args.file)
     except TrackFormatError as exc:
@@ -81,12 +120,12 @@ def run_import(args) -> int:
     analysis = None
     if not args.no_angles:
         try:
-            analysis = analyze_tracks(tracks)
+            analysis = analyze_tracks(tracks, params_for_trial(given)[0])
         except (ValueError, IndexError) as exc:
             _err('import-tracking', f'warning: θ1/θ3 not derived ({exc}); writing the '
                                     'marker frames only')
     try:
-        report = write_tracking_bag(tracks, args.out, analysis)
+        report = write_tracking_bag(tracks, args.out, analysis, conditions=given)
     except (FileExistsError, OSError) as exc:
         _err('import-tracking', exc)
         return 1
@@ -161,8 +200,14 @@ def run_analyze(args) -> int:
     from .analysis import TrackFormatError, analyze_tracks
     from .analysis.bag_input import is_bag_path, load_trial_input
     from .analysis.conditions import params_for_trial
+    from .nodes.trial_conditions import ConditionError
     from .recording import BagError
 
+    try:
+        given = given_conditions(args)
+    except ConditionError as exc:
+        _err('analyze', exc)
+        return USAGE_ERROR
     bag = is_bag_path(args.path)
     try:
         trial = load_trial_input(args.path)
@@ -174,7 +219,7 @@ def run_analyze(args) -> int:
         _err('analyze', f'warning: {args.path} is damaged: {"; ".join(trial.problems)}')
         _err('analyze', f'warning: analysing the {trial.tracks.n_frames} frames recorded '
                         f'before the damage (up to t = {last:.4f} s)')
-    params, parameters = params_for_trial(trial.conditions)
+    params, parameters = params_for_trial(trial.conditions, given=given)
     if trial.force_N is not None:
         params.tendon_force_N, params.tendon_force_time_s = trial.force_N, trial.force_time_s
     try:
@@ -236,6 +281,7 @@ def add_commands(commands) -> None:
                     'software\'s .xlsx export) and the derived θ1(t), θ3(t) into a bag.')
     imp.add_argument('file', help='.csv, .csv.gz or .xlsx')
     imp.add_argument('--out', required=True, help='new bag directory')
+    _add_condition_options(imp)
     imp.add_argument('--no-angles', action='store_true',
                      help='write only the marker frames (no /analysis/joint_angles)')
     imp.set_defaults(run=run_import)
@@ -246,6 +292,7 @@ def add_commands(commands) -> None:
     ana.add_argument('path', metavar='BAG_OR_TRACKING_FILE')
     ana.add_argument('--json', action='store_true', help='print the summary as JSON')
     ana.add_argument('--plot', metavar='FILE.png', help='write the trial figure')
+    _add_condition_options(ana)
     ana.set_defaults(run=run_analyze)
 
     rec = commands.add_parser(

@@ -274,3 +274,67 @@ def test_frames_without_the_strike_are_refused_with_the_reason():
                            markers_mm={n: xy[keep] for n, xy in tracks.markers_mm.items()})
     with pytest.raises(ValueError, match='no strike|do not hold the strike'):
         analyze_tracks(loading)
+
+
+# --------------------------------------------------- trial conditions a tracking file lacks
+@real_trial
+def test_given_contact_angle_and_d_t_enter_the_analysis(capsys, csv_analysis):
+    """A tracking file carries no trial conditions: --contact-angle-deg sets θ3's zero (the
+    contact angle is reported as given; unknown without it), --d-t-mm the tendon geometry.
+    Both move the overcentering, which depends on the absolute θ3 and on d_t
+    (docs/replay_analysis.md: 1.77 s with 3.2 deg)."""
+    default = csv_analysis.summary()
+    code, report, err = analyze_json(capsys, DATA)
+    assert code == 0 and np.isnan(default['contact_angle_deg'])
+    assert report['contact_angle_deg'] is None and report['input']['parameters'] == []
+    code, out, err = run(capsys, 'analyze', DATA, '--json', '--contact-angle-deg', 3.2)
+    assert code == 0, err
+    given = json.loads(out)
+    assert given['contact_angle_deg'] == pytest.approx(3.2, abs=1e-12)
+    assert given['input']['parameters'] == ['contact angle 3.2 deg (given)']
+    assert given['overcentering_s'] == pytest.approx(1.77, abs=0.02)
+    assert given['peak_tip_speed_mps'] != default['peak_tip_speed_mps']   # cos θ3 in v_tip
+    code, out, err = run(capsys, 'analyze', DATA, '--json', '--d-t-mm', 19)
+    assert code == 0, err
+    short = json.loads(out)
+    assert short['input']['parameters'] == ['d_t = 19 mm (given)']
+    assert abs(short['overcentering_s'] - default['overcentering_s']) > 0.05
+    assert short['peak_tip_speed_mps'] == pytest.approx(default['peak_tip_speed_mps'])
+
+
+@real_trial
+def test_import_keeps_the_given_conditions_for_the_bag(capsys, tmp_path):
+    bag = tmp_path / 'trial1_19mm'
+    code, _, err = run(capsys, 'import-tracking', DATA, '--out', bag, '--d-t-mm', 19,
+                       '--contact-angle-deg', 3.2)
+    assert code == 0, err
+    conditions = BagReader(bag).metadata('trial_conditions')
+    assert float(conditions['d_t_mm']) == 19.0
+    assert float(conditions['contact_angle_deg']) == 3.2
+    code, from_bag, err = analyze_json(capsys, bag)
+    assert code == 0, err
+    assert from_bag['input']['parameters'] == ['d_t = 19 mm (trial conditions)',
+                                               'contact angle 3.2 deg (trial conditions)']
+    code, out, err = run(capsys, 'analyze', DATA, '--json', '--d-t-mm', 19,
+                         '--contact-angle-deg', 3.2)
+    from_file = json.loads(out)
+    for key in ('overcentering_s', 'peak_tip_speed_mps', 'contact_angle_deg'):
+        assert from_bag[key] == pytest.approx(from_file[key], rel=1e-9)
+    # The angles the import wrote are the ones of the given geometry: θ3 starts at 3.2 deg.
+    theta3 = [m.position[1] for _, _, _, m in BagReader(bag).messages([ANGLES_TOPIC])][:100]
+    assert np.median(theta3) == pytest.approx(np.radians(3.2), abs=np.radians(0.2))
+
+
+@pytest.mark.parametrize('option, value, why', [
+    ('--contact-angle-deg', 60, 'contact_angle_deg = 60.0 deg is outside [-45.0, 45.0] deg'),
+    ('--d-t-mm', 0.5, 'd_t_mm = 0.5 mm is outside [1.0, 100.0] mm'),
+    ('--d-t-mm', 'nan', 'd_t_mm = nan mm is outside'),
+])
+def test_given_condition_out_of_range_is_refused(capsys, tmp_path, option, value, why):
+    """Checked before anything is read or written: exit 2, naming the option, value and range."""
+    code, _, err = run(capsys, 'analyze', tmp_path / 'absent.csv', option, value)
+    assert code == 2 and f'{option}: {why}' in err
+    out = tmp_path / 'bag'
+    code, _, err = run(capsys, 'import-tracking', tmp_path / 'absent.csv', '--out', out,
+                       option, value)
+    assert code == 2 and f'{option}: {why}' in err and not out.exists()

@@ -36,9 +36,14 @@ def scene_of(conditions: dict):
         return None
 
 
-def params_for_trial(conditions: dict, params: AnalysisParams | None = None
-                     ) -> tuple[AnalysisParams, list[str]]:
-    """(parameters, what was taken from where) for a trial with these conditions."""
+def params_for_trial(conditions: dict, params: AnalysisParams | None = None,
+                     given: dict | None = None) -> tuple[AnalysisParams, list[str]]:
+    """(parameters, what was taken from where) for a trial with these conditions.
+
+    ``given``: d_t_mm and contact_angle_deg stated by the user (a tracking file carries no
+    trial conditions; the authors, too, measure each trial's contact angle apart from its
+    tracks); they override the bag's.
+    """
     params = params or AnalysisParams()
     notes = []
     scene = scene_of(conditions)
@@ -59,12 +64,13 @@ def params_for_trial(conditions: dict, params: AnalysisParams | None = None
                 m2_g=scene.arm.mass_g, I2_gmm2=scene.arm.inertia_g_mm2,
                 com2_mm=(scene.arm.com_x_mm, scene.arm.com_y_mm)))
         notes.append(f'geometry, spring and inertia of scene {scene.name!r}')
-    d_t = _number(conditions, 'd_t_mm')
-    if d_t is not None:
-        params = replace(params, d_t_mm=d_t)
-        notes.append(f'd_t = {d_t:g} mm (trial conditions)')
-    contact = _number(conditions, 'contact_angle_deg')
-    if contact is not None:
-        params = replace(params, contact_angle_rad=math.radians(contact))
-        notes.append(f'contact angle {contact:g} deg (trial conditions)')
+    for source, values in (('trial conditions', conditions), ('given', given or {})):
+        d_t = _number(values, 'd_t_mm')
+        if d_t is not None:
+            params = replace(params, d_t_mm=d_t)
+            notes.append(f'd_t = {d_t:g} mm ({source})')
+        contact = _number(values, 'contact_angle_deg')
+        if contact is not None:
+            params = replace(params, contact_angle_rad=math.radians(contact))
+            notes.append(f'contact angle {contact:g} deg ({source})')
     return params, notes

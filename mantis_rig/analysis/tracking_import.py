@@ -10,7 +10,8 @@ imported trials:
   ``['theta1', 'theta3']``: the model's body angle θ1 and the arm angle θ3 relative to the body
   (rad, smoothed) and their rates (rad/s), as :func:`~mantis_rig.analysis.analyze_tracks`
   derives them (pivot fit from the marker arcs, zero-phase adaptive smoothing);
-* metadata ``trial_conditions`` (source file, format, the file's header block) and
+* metadata ``trial_conditions`` (source file, format, the file's header block, and the d_t and
+  contact angle the user states for the trial) and
   ``tracking_fit`` (fitted body pivot in the tracker's frame as recorded, and L1).
 
 Log times (and JointState stamps) are the file's times shifted so none is negative:
@@ -65,8 +66,13 @@ def _conditions(tracks: MarkerTracks, origin_s: float) -> dict:
 
 
 def write_tracking_bag(tracks: MarkerTracks, output, analysis: TrialAnalysis | None = None,
-                       frames_per_block: int = FRAMES_PER_BLOCK) -> ImportReport:
-    """Write ``tracks`` (and ``analysis``'s angles, if given) as a new bag at ``output``."""
+                       frames_per_block: int = FRAMES_PER_BLOCK,
+                       conditions: dict | None = None) -> ImportReport:
+    """Write ``tracks`` (and ``analysis``'s angles, if given) as a new bag at ``output``.
+
+    ``conditions``: trial conditions the file does not carry (d_t_mm, contact_angle_deg),
+    stated by the user; they join ``trial_conditions`` so that analysing the bag uses them.
+    """
     origin_s = min(0.0, float(tracks.time_s[0]))
     log_ns = np.round((tracks.time_s - origin_s) * 1e9).astype(np.int64)
     n_blocks = n_angles = 0
@@ -74,7 +80,8 @@ def write_tracking_bag(tracks: MarkerTracks, output, analysis: TrialAnalysis | N
         bag.add_topic(MARKERS_TOPIC, 'std_msgs/msg/Float64MultiArray')
         if analysis is not None:
             bag.add_topic(ANGLES_TOPIC, 'sensor_msgs/msg/JointState')
-        bag.add_metadata(TRIAL_CONDITIONS, _conditions(tracks, origin_s))
+        bag.add_metadata(TRIAL_CONDITIONS, {**_conditions(tracks, origin_s),
+                                             **{k: str(v) for k, v in (conditions or {}).items()}})
         if analysis is not None and analysis.linkage is not None:
             x, y = (float(v) for v in analysis.linkage.body_pivot_mm)
             bag.add_metadata(FIT_RECORD, {'body_pivot_x_mm': repr(x), 'body_pivot_y_mm': repr(y),
