@@ -67,7 +67,7 @@ def run_replay(args) -> int:
 
 # ------------------------------------------------------------- trial conditions, by hand
 #: Trial conditions a tracking file does not carry, given on the command line (the rig's
-#: bags carry them in ``trial_conditions``): option -> trial condition.
+#: bags carry them in ``trial_conditions``): trial condition -> option.
 CONDITION_OPTIONS = {'d_t_mm': '--d-t-mm', 'contact_angle_deg': '--contact-angle-deg'}
 
 
@@ -120,7 +120,7 @@ def run_import(args) -> int:
     analysis = None
     if not args.no_angles:
         try:
-            analysis = analyze_tracks(tracks, params_for_trial(given)[0])
+            analysis = analyze_tracks(tracks, params_for_trial({}, given=given)[0])
         except (ValueError, IndexError) as exc:
             _err('import-tracking', f'warning: θ1/θ3 not derived ({exc}); writing the '
                                     'marker frames only')
