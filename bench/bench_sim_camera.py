@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mantis_rig.analysis.sim_camera_study import (  # noqa: E402
     PHASES,
-    film_errors,
+    phase_sweep,
     run_strike,
     truth_of,
 )
@@ -46,7 +46,7 @@ def main() -> None:
           f'pixel {scene.camera.pixel_mm} mm')
     for rate in args.frame_rate or [scene.camera.frame_rate_hz]:
         t0 = time.perf_counter()
-        films = [film_errors(world, truth, rate, k / args.phases) for k in range(args.phases)]
+        films = phase_sweep(world, truth, rate, args.phases)
         wall = time.perf_counter() - t0
         print(f'\n{rate:g} frames/s, {args.phases} frame phases '
               f'({wall / args.phases:.2f} s per film analysed)\n')

@@ -278,15 +278,14 @@ def test_frames_without_the_strike_are_refused_with_the_reason():
 
 # --------------------------------------------------- trial conditions a tracking file lacks
 @real_trial
-def test_given_contact_angle_and_d_t_enter_the_analysis(capsys, csv_analysis):
+def test_given_contact_angle_and_d_t_enter_the_analysis(capsys):
     """A tracking file carries no trial conditions: --contact-angle-deg sets θ3's zero (the
     contact angle is reported as given; unknown without it), --d-t-mm the tendon geometry.
     Both move the overcentering, which depends on the absolute θ3 and on d_t
     (docs/replay_analysis.md: 1.77 s with 3.2 deg)."""
-    default = csv_analysis.summary()
-    code, report, err = analyze_json(capsys, DATA)
-    assert code == 0 and np.isnan(default['contact_angle_deg'])
-    assert report['contact_angle_deg'] is None and report['input']['parameters'] == []
+    code, default, err = analyze_json(capsys, DATA)
+    assert code == 0, err
+    assert default['contact_angle_deg'] is None and default['input']['parameters'] == []
     code, out, err = run(capsys, 'analyze', DATA, '--json', '--contact-angle-deg', 3.2)
     assert code == 0, err
     given = json.loads(out)

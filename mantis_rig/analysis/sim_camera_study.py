@@ -101,12 +101,19 @@ def film_errors(world: World, truth: StrikeTruth, frame_rate_hz: float,
         peak_tip_speed_rel=summary['peak_tip_speed_mps'] / truth.peak_tip_speed_mps - 1.0)
 
 
+def phase_sweep(world: World, truth: StrikeTruth, frame_rate_hz: float, n_phases: int,
+                before_s: float = 0.3) -> list[FilmErrors]:
+    """The errors of ``n_phases`` films at evenly spaced frame phases."""
+    return [film_errors(world, truth, frame_rate_hz, k / n_phases, before_s)
+            for k in range(n_phases)]
+
+
 def study(scene_name: str = 'air_23mm_rig', frame_rate_hz: float | None = None,
           n_phases: int = 8, before_s: float = 0.3) -> tuple[StrikeTruth, list[FilmErrors]]:
-    """The truth and the errors of ``n_phases`` films at evenly spaced frame phases."""
+    """One strike of the scene: its truth and :func:`phase_sweep` at the scene's frame rate
+    (or ``frame_rate_hz``)."""
     scene = load_scene(scene_name)
-    rate = frame_rate_hz or scene.camera.frame_rate_hz
     world = run_strike(scene)
     truth = truth_of(world)
-    return truth, [film_errors(world, truth, rate, k / n_phases, before_s)
-                   for k in range(n_phases)]
+    return truth, phase_sweep(world, truth, frame_rate_hz or scene.camera.frame_rate_hz,
+                              n_phases, before_s)
