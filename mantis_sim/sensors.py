@@ -4,7 +4,9 @@ Effects, each applied only when the scene names it:
 - loadcell_dynamics: the load cell and its amplifier low-pass the force (first order at
   loadcell.bandwidth_hz), add white noise (loadcell.noise_N rms), and the ADC quantises the
   amplifier's voltage to loadcell.adc_bits over +/- loadcell.adc_range_V (clipping beyond).
-- camera_sampling: marker positions are quantised to the camera's pixels (camera.pixel_mm).
+- camera_sampling: marker positions as the tracker reports them: white tracking noise
+  (camera.tracking_noise_px rms), then rounded to the tracker's sub-pixel step
+  (camera.tracker_resolution_px of camera.pixel_mm).
 Without an effect the sensor passes the truth through. Noise is reproducible from a seed.
 """
 from __future__ import annotations
@@ -50,12 +52,21 @@ class LoadCellSensor:
 
 
 class CameraSensor:
-    def __init__(self, scene: Scene):
+    def __init__(self, scene: Scene, seed: int = 0):
+        cam = scene.camera
         self.enabled = scene.has('camera_sampling')
-        self.pixel_m = scene.camera.pixel_mm * 1e-3
+        self.step_m = cam.pixel_mm * cam.tracker_resolution_px * 1e-3
+        self.noise_m = cam.pixel_mm * cam.tracking_noise_px * 1e-3
+        self._rng = np.random.default_rng(seed)
 
     def image(self, markers_m: dict) -> dict:
         """Marker positions as the tracking software reports them (m)."""
         if not self.enabled:
             return markers_m
-        return {name: np.round(xy / self.pixel_m) * self.pixel_m for name, xy in markers_m.items()}
+        out = {}
+        for name, xy in markers_m.items():
+            xy = np.asarray(xy, float)
+            if self.noise_m > 0.0:
+                xy = xy + self._rng.normal(0.0, self.noise_m, xy.shape)
+            out[name] = np.round(xy / self.step_m) * self.step_m
+        return out

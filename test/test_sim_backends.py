@@ -115,9 +115,11 @@ def test_camera_frames_cover_the_strike(pulled_trial):
     assert frames.time_s[0] < world.phase_start_s['II'] < world.peak_time_s < frames.time_s[-1]
     assert np.allclose(np.diff(frames.time_s), 1 / 19_000.0)
     assert sorted(frames.markers_mm) == ['ma1', 'ma2', 'mb1', 'mb2', 'mb3']
-    pixel = pulled_trial['scene'].camera.pixel_mm
+    camera = pulled_trial['scene'].camera
+    step = camera.pixel_mm * camera.tracker_resolution_px
     xy = frames.markers_mm['ma2']
-    assert np.allclose(xy / pixel, np.round(xy / pixel), atol=1e-6)   # quantised to pixels
+    assert np.allclose(xy / step, np.round(xy / step), atol=1e-6)   # the tracker's 0.1 px
+    assert not np.allclose(xy / camera.pixel_mm, np.round(xy / camera.pixel_mm), atol=1e-6)
     arm_travel = np.linalg.norm(xy[-1] - xy[0])
     assert arm_travel > 5.0                                             # the arm struck
 

@@ -235,3 +235,58 @@ def rotation_model_rms(points: np.ndarray, pivot: np.ndarray, iterations: int = 
     angle = rotation_about(pivot, pivot + offsets, points)
     predicted = pivot + rotate(np.broadcast_to(offsets, points.shape), angle)
     return float(np.sqrt(np.mean(np.sum((points - predicted) ** 2, axis=-1))))
+
+
+# A marker set's shape is taken from frames where all its markers are tracked; fewer than this
+# and the marker seen least is left out instead.
+MIN_SHAPE_FRAMES = 20
+
+
+def complete_rigid_markers(points: np.ndarray, min_markers: int = 2,
+                           ) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """Fill a rigid marker set's lost markers (NaN) from the markers still tracked.
+
+    The set's shape is the mean shape (:func:`rigid_poses`) over the frames where every marker
+    is tracked. In a frame where at least ``min_markers`` are tracked, the set's pose is the
+    least-squares fit of that shape to them (2-D Kabsch on the tracked subset), and a lost
+    marker is where that pose puts it: the body's own motion, not an interpolation in time.
+    A frame with fewer tracked markers is a gap: it stays NaN.
+
+    If too few frames show every marker (:data:`MIN_SHAPE_FRAMES`), the marker lost most often
+    is dropped and the rest are tried again.
+
+    Returns (points (n, m', 2), ok (n,) bool: frame has a pose, indices of the markers kept).
+    """
+    points = np.asarray(points, float)
+    kept = list(range(points.shape[1]))
+    while True:
+        sub = points[:, kept]
+        seen = np.all(np.isfinite(sub), axis=2)
+        full = np.all(seen, axis=1)
+        if full.sum() >= MIN_SHAPE_FRAMES or len(kept) <= min_markers:
+            break
+        kept.pop(int(np.argmin(seen.sum(axis=0))))
+    if full.sum() < min(MIN_SHAPE_FRAMES, 3) or len(kept) < min_markers:
+        return sub, np.zeros(len(sub), bool), kept
+    out = sub.copy()
+    if full.all():
+        return out, full, kept
+    template, _, _ = rigid_poses(sub[full], iterations=2)
+    ok = seen.sum(axis=1) >= min_markers
+    # Frames that lack a marker, grouped by which markers they still have.
+    patterns = {}
+    for k in np.nonzero(ok & ~full)[0]:
+        patterns.setdefault(tuple(seen[k]), []).append(k)
+    for pattern, frames in patterns.items():
+        have = np.array(pattern)
+        frames = np.array(frames)
+        tpl = template[have]
+        centre = tpl.mean(axis=0)
+        angle, centroid = kabsch_angles(sub[frames][:, have], tpl - centre)
+        placed = centroid[:, None, :] + rotate(np.broadcast_to(template - centre,
+                                                              (len(frames),) + template.shape),
+                                               angle)
+        for j in np.nonzero(~have)[0]:
+            out[frames, j] = placed[:, j]
+    out[~ok] = np.nan
+    return out, ok, kept

@@ -39,12 +39,14 @@ Conventions (those of physics.md, in a right-handed frame):
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 
 import numpy as np
 from scipy import stats
 
 from . import phases as ph
 from .geometry import (
+    complete_rigid_markers,
     fit_fixed_pivot,
     fixed_point_of_motion,
     rigid_poses,
@@ -70,6 +72,10 @@ STRIKE_SPEED_SHARE = 0.1
 # Below this the strike is not resolved well enough to fit pivots on: use all frames.
 MIN_STRIKE_FRAMES = 25
 MIN_STRIKE_ROTATION_RAD = 0.1
+# The link's direction a -> b at the start of a trial in the robot-facing frame (camera x axis
+# towards the tendon guide): 2.0-2.5 rad on every real trial seen (physics.md's set-up, 2.48).
+# Only its half-plane is used, to tell a camera mounted the other way round (tilt 180°).
+NOMINAL_THETA1_RAD = 2.3
 # Significance level at which the strike is taken to rotate about another point than the
 # loading (:func:`pivot_moved`).
 PIVOT_SHIFT_P = 1e-3
@@ -91,6 +97,9 @@ class LinkageFit:
     # there is no strike; its distance from body_pivot_mm shows the joint's play.
     loading_pivot_mm: np.ndarray | None = None
     body_noise_floor_rad: float = 0.0    # quantisation floor for the body angle θ1
+    # Rotation (deg) from the tracker's axes to the robot-facing frame: the calibration's tilt,
+    # or 180 where no tilt is stated and the markers show the camera the other way round.
+    robot_turn_deg: float = 0.0
 
 
 @dataclass
@@ -117,23 +126,62 @@ def coordinate_resolution_mm(tracks: MarkerTracks) -> float:
 
 
 def _right_handed(tracks: MarkerTracks, names: list[str]) -> np.ndarray:
-    """(n, m, 2) positions of the named markers, y flipped if the frame is left-handed."""
-    pts = np.stack([_fill_gaps(tracks.time_s, tracks.markers_mm[n]) for n in names], axis=1)
+    """(n, m, 2) positions of the named markers in the robot-facing right-handed frame: the
+    calibration's tilt undone (:func:`robot_turn_rad`), then y flipped if the tracker's frame
+    is left-handed."""
+    pts = np.stack([tracks.markers_mm[n] for n in names], axis=1)
     if tracks.handedness == 'left':
         pts = pts * np.array([1.0, -1.0])
-    return pts
+    turn = robot_turn_rad(tracks)
+    return rotate(pts, np.full(len(pts), turn)) if turn else pts
 
 
-def _fill_gaps(time_s: np.ndarray, xy: np.ndarray) -> np.ndarray:
-    ok = np.all(np.isfinite(xy), axis=1)
-    if ok.all():
-        return xy
-    if ok.sum() < 2:
-        raise ValueError('a marker is lost in almost every frame')
-    return np.column_stack([np.interp(time_s, time_s[ok], xy[ok, k]) for k in range(2)])
+def robot_turn_rad(tracks: MarkerTracks) -> float:
+    """Rotation (rad, counter-clockwise in the right-handed frame) that undoes the camera's
+    tilt: the calibration's, or else the orientation the markers show
+    (``tracks.source['inferred_tilt_deg']``, set by :func:`complete_tracks`)."""
+    tilt = tracks.tilt_deg
+    if tilt is None:
+        tilt = tracks.source.get('inferred_tilt_deg', 0.0)
+    return math.radians(float(tilt))
+
+
+def complete_tracks(tracks: MarkerTracks) -> MarkerTracks:
+    """The tracks with every lost marker placed by its body's pose from the markers still
+    tracked (:func:`geometry.complete_rigid_markers`); frames where the body or the arm keeps
+    fewer than two tracked markers are gaps and are left out (the analysis's time base skips
+    them). Raises TrackFormatError if too few frames remain."""
+    lost = any(np.isnan(xy).any() for xy in tracks.markers_mm.values())
+    if not lost:
+        return tracks
+    markers: dict[str, np.ndarray] = {}
+    keep = np.ones(tracks.n_frames, bool)
+    notes = []
+    for names in (tracks.body_markers, tracks.arm_markers):
+        pts = np.stack([tracks.markers_mm[n] for n in names], axis=1)
+        filled, ok, kept = complete_rigid_markers(pts)
+        keep &= ok
+        dropped = sorted(set(names) - {names[i] for i in kept})
+        if dropped:
+            notes.append(f'{",".join(dropped)} left out (too few frames with every marker)')
+        markers.update({names[i]: filled[:, j] for j, i in enumerate(kept)})
+    gaps = int((~keep).sum())
+    if gaps:
+        notes.append(f'{gaps} frames with fewer than 2 tracked markers on the body or the arm '
+                     'are gaps')
+    source = dict(tracks.source)
+    source['gaps'] = '; '.join(notes) if notes else 'lost markers placed from the tracked ones'
+    out = MarkerTracks(time_s=tracks.time_s[keep], frames=tracks.frames[keep],
+                       markers_mm={n: xy[keep] for n, xy in markers.items()},
+                       handedness=tracks.handedness, tilt_deg=tracks.tilt_deg, source=source)
+    out.validate()
+    return out
 
 
 def _to_camera(tracks: MarkerTracks, point: np.ndarray) -> np.ndarray:
+    """A point of the analysis frame (:func:`_right_handed`) in the tracker's frame."""
+    turn = robot_turn_rad(tracks)
+    point = rotate(np.asarray(point, float)[None, :], np.array([-turn]))[0] if turn else point
     return point * np.array([1.0, -1.0]) if tracks.handedness == 'left' else point
 
 
@@ -291,6 +339,21 @@ def fit_linkage(tracks: MarkerTracks, arm_axis_offset_rad: float = 0.0,
        seen from a; θ3 = angle from the arm axis to b→a.
     """
     tracks.validate()
+    tracks = complete_tracks(tracks)
+    fit, angles = _fit_linkage(tracks, arm_axis_offset_rad, speed_share)
+    if tracks.tilt_deg is None and math.cos(angles.theta1_cam_rad[0] - NOMINAL_THETA1_RAD) < 0:
+        # No calibration states the camera's tilt, and the link points away from where the
+        # robot's frame has it: the camera looks the other way round (a tilt of 180°).
+        source = {**tracks.source, 'inferred_tilt_deg': 180.0}
+        tracks = MarkerTracks(tracks.time_s, tracks.frames, tracks.markers_mm,
+                              tracks.handedness, None, source)
+        fit, angles = _fit_linkage(tracks, arm_axis_offset_rad, speed_share)
+    fit.robot_turn_deg = math.degrees(robot_turn_rad(tracks))
+    return fit, angles
+
+
+def _fit_linkage(tracks: MarkerTracks, arm_axis_offset_rad: float, speed_share: float,
+                 ) -> tuple[LinkageFit, JointAngles]:
     body = _right_handed(tracks, tracks.body_markers)
     arm = _right_handed(tracks, tracks.arm_markers)
     t = tracks.time_s

@@ -22,6 +22,7 @@ from .smoothing import (
     linear_rate_noise,
     local_poly_fit,
     smooth_angle,
+    smoothing_spline_fit,
 )
 from .tracking import MIN_FRAMES, MarkerTracks, TrackFormatError
 
@@ -95,6 +96,7 @@ class TrialAnalysis:
     strike_half_width: int = 0                  # frames, of the strike's polynomial fits
     linkage: LinkageFit | None = None
     body_pivot_mm: np.ndarray | None = None     # in AnalysisParams.pivot_frame
+    overcentering_method: str = 'tendon geometry'   # or 'trajectory knee'
 
     @property
     def arm_ke_share_at_peak(self) -> float:
@@ -113,6 +115,7 @@ class TrialAnalysis:
             'phase_start_s': {'I': p.loading_start_s, 'II': p.unlatch_s,
                               'III': p.overcentering_s, 'IV': p.max_contraction_s},
             'overcentering_s': p.overcentering_s,
+            'overcentering_method': self.overcentering_method,
             'peak_tip_speed_s': p.peak_tip_speed_s,
             'peak_body_speed_radps': float(np.max(self.omega1_radps[strike])),
             'peak_arm_speed_radps': float(np.max(self.omega3_radps[strike])),
@@ -136,7 +139,59 @@ def analyze_tracks(tracks: MarkerTracks, params: AnalysisParams | None = None) -
     result.linkage = linkage
     result.body_pivot_mm = pivot_in_frame(linkage.body_pivot_mm, tracks.handedness,
                                           params.pivot_frame)
+    check_plausible(result, tracks)
     return result
+
+
+class ImplausibleResult(ValueError):
+    """The analysis gave a number the robot cannot produce: it is refused, with the reason."""
+
+
+# What the robot can physically do (the rig's size and its spring): numbers outside are refused.
+L1_RANGE_MM = (15.0, 25.0)
+SPRING_ENERGY_RANGE_MJ = (0.0, 300.0)
+TIP_SPEED_RANGE_MPS = (0.0, 60.0)
+
+
+def check_plausible(result: TrialAnalysis, tracks: MarkerTracks | None = None) -> None:
+    """Raise :class:`ImplausibleResult` naming the first impossible number, and what likely
+    caused it (a length unit that contradicts the numbers, lost markers read as positions)."""
+    lo, hi = L1_RANGE_MM
+    if not lo <= result.L1_mm <= hi:
+        raise ImplausibleResult(_length_problem(result.L1_mm, tracks))
+    s = result.summary()
+    energy = s['max_spring_energy_mJ']
+    if not SPRING_ENERGY_RANGE_MJ[0] <= energy <= SPRING_ENERGY_RANGE_MJ[1]:
+        raise ImplausibleResult(
+            f'max spring energy {energy:.0f} mJ is outside the robot\'s '
+            f'{SPRING_ENERGY_RANGE_MJ[0]:g}-{SPRING_ENERGY_RANGE_MJ[1]:g} mJ: the body angle '
+            'does not match the robot\'s frame (camera orientation, or a lost marker)')
+    v = s['peak_tip_speed_mps']
+    if not (math.isfinite(v) and TIP_SPEED_RANGE_MPS[0] <= v <= TIP_SPEED_RANGE_MPS[1]):
+        raise ImplausibleResult(
+            f'peak tip speed {v:.1f} m/s is outside the robot\'s '
+            f'{TIP_SPEED_RANGE_MPS[0]:g}-{TIP_SPEED_RANGE_MPS[1]:g} m/s')
+    starts = [(k, x) for k, x in s['phase_start_s'].items() if math.isfinite(x)]
+    starts.append(('peak tip speed', s['peak_tip_speed_s']))
+    for (k0, t0), (k1, t1) in zip(starts, starts[1:]):
+        if not t0 <= t1:
+            raise ImplausibleResult(f'phases out of order: {k0} at {t0:.5f} s comes after '
+                                    f'{k1} at {t1:.5f} s')
+
+
+def _length_problem(L1_mm: float, tracks: MarkerTracks | None) -> str:
+    lo, hi = L1_RANGE_MM
+    text = f'L1 = {L1_mm:.4g} mm is outside the robot\'s {lo:g}-{hi:g} mm'
+    source = tracks.source if tracks is not None else {}
+    unit = source.get('length_unit')
+    stated = f'the file says {unit}' if unit else 'the file states no unit'
+    if lo <= L1_mm * 1e3 <= hi:
+        return (f'{text}: the lengths look a thousand times too small ({stated}); if the '
+                'numbers are millimetres, give --length-unit mm')
+    if lo <= L1_mm * 1e-3 <= hi:
+        return (f'{text}: the lengths look a thousand times too large ({stated}); if the '
+                'numbers are micrometres, give --length-unit um')
+    return f'{text}: the markers do not describe the robot\'s linkage'
 
 
 PIVOT_FRAMES = ('x_mirrored', 'tracker', 'right_handed')
@@ -239,6 +294,12 @@ def _analyze(t: np.ndarray, theta1_raw: np.ndarray, theta3_raw: np.ndarray, L1_m
                               params.d_t_mm)
         work = tendon_work_mJ(force, lt)
 
+    oc_method = 'tendon geometry'
+    if not math.isfinite(t_oc) and math.isfinite(t_knee):
+        # The tendon line never crosses the pivot in the assumed geometry (the guide's
+        # direction is not seen, and the set-up's θ1 varies by ±0.25 rad between trials): the
+        # knee of the (θ1, θ3) path, where the tendon stops holding the arm, stands in.
+        t_oc, oc_method = t_knee, 'trajectory knee'
     times = ph.PhaseTimes(t_load, t_unlatch, t_oc, t_iv, t_peak, i_iv, i_peak)
     return TrialAnalysis(
         time_s=t, theta1_rad=th1, theta3_rad=th3, omega1_radps=w1, omega3_radps=w3,
@@ -248,13 +309,22 @@ def _analyze(t: np.ndarray, theta1_raw: np.ndarray, theta3_raw: np.ndarray, L1_m
         ke_body_mJ=ke_body, ke_arm_mJ=ke_arm, overcentering_residual_mm=residual,
         tendon_work_mJ=work, phases=times, L1_mm=float(L1_mm), contact_angle_rad=contact,
         overcentering_trajectory_s=t_knee, peak_tip_speed=v_peak, strike_half_width=strike_k,
+        overcentering_method=oc_method,
     )
+
+
+# Below this half-width (frames) a local quintic's rate is dominated by the frames' noise (at
+# 6,000 frames/s the strike spans ~20 frames): the strike is fitted by one smoothing spline
+# whose smoothness the data choose (generalised cross-validation) instead.
+MIN_POLY_HALF_WIDTH = 6
 
 
 def _strike_rates(t, theta1_raw, theta3_raw, th1, th3, w1, w3, i_iv, L1_mm, params) -> int:
     """Replace the smoothed angles and rates of the strike (in place) by local polynomial fits
     (:func:`smoothing.strike_half_width`): from the start of IV to as far past the peak tip
-    speed as the peak lies after the start. Returns the half-width used (0: none)."""
+    speed as the peak lies after the start. Where the strike spans too few frames for them
+    (:data:`MIN_POLY_HALF_WIDTH`), by a smoothing spline through the strike and as many frames
+    either side. Returns the half-width used (0: none)."""
     dt_s = float(np.median(np.diff(t)))
     i_peak = ph.peak_after(tip_speed_mps(L1_mm, params.L3_mm, th3, w1, w3), i_iv)
     stop = min(len(t), i_peak + max(i_peak - i_iv, 1) + 1)
@@ -263,6 +333,13 @@ def _strike_rates(t, theta1_raw, theta3_raw, th1, th3, w1, w3, i_iv, L1_mm, para
         return 0
     k = max(STRIKE_POLY // 2 + 2, int(round(params.strike_window_share * (i_peak - i_iv))))
     k = min(k, (len(t) - 1) // 2 - 1)
+    if k < MIN_POLY_HALF_WIDTH:
+        span = slice(max(0, i_iv - (stop - i_iv)), min(len(t), stop + (stop - i_iv)))
+        for raw, smooth, rate in ((theta1_raw, th1, w1), (theta3_raw, th3, w3)):
+            fitted, fitted_rate = smoothing_spline_fit(t[span], raw[span])
+            smooth[region] = fitted[i_iv - span.start:stop - span.start]
+            rate[region] = fitted_rate[i_iv - span.start:stop - span.start]
+        return k
     for raw, smooth, rate in ((theta1_raw, th1, w1), (theta3_raw, th3, w3)):
         fitted, fitted_rate = local_poly_fit(raw, dt_s, k)
         smooth[region] = fitted[region]

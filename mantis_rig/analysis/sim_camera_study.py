@@ -75,7 +75,9 @@ def film(world: World, frame_rate_hz: float, frame_phase: float, before_s: float
     first = math.ceil((t_iv - before_s) * frame_rate_hz)
     count = int(round((before_s + after_s) * frame_rate_hz))
     times = (first + frame_phase + np.arange(count)) / frame_rate_hz
-    markers_m = CameraSensor(world.scene).image(world.marker_positions_m(times))
+    # Each film its own draw of the tracking noise, reproducible from its phase.
+    seed = int(round(frame_phase * 1e6))
+    markers_m = CameraSensor(world.scene, seed).image(world.marker_positions_m(times))
     return MarkerTracks(time_s=times, frames=np.arange(count),
                         markers_mm={name: xy * 1e3 for name, xy in markers_m.items()},
                         handedness='left', source={'format': 'simulated camera'})

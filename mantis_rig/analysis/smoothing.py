@@ -129,3 +129,17 @@ def local_poly_fit(angle_rad: np.ndarray, dt_s: float, half_width: int,
     return (savgol_filter(angle_rad, window, poly),
             savgol_filter(angle_rad, window, poly, deriv=1, delta=dt_s))
 
+
+
+def smoothing_spline_fit(time_s: np.ndarray, angle_rad: np.ndarray,
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """(smoothed angle, rate rad/s) of a cubic smoothing spline whose smoothing is chosen by
+    generalised cross-validation (scipy's ``make_smoothing_spline``): the fit follows the
+    motion as closely as the frames' own noise allows, whatever the frame rate. Time runs in
+    frames inside (the GCV search is badly scaled in seconds)."""
+    from scipy.interpolate import make_smoothing_spline
+
+    dt_s = float(np.median(np.diff(time_s)))
+    frames = (time_s - time_s[0]) / dt_s
+    spline = make_smoothing_spline(frames, angle_rad)
+    return spline(frames), spline.derivative()(frames) / dt_s

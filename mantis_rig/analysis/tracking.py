@@ -12,18 +12,9 @@ Accepted CSV layout (optionally gzipped, detected from the ``.gz`` suffix)::
 Coordinate columns may also carry a unit suffix: ``mb1_x_mm``. Extra non-marker columns are
 an error (they usually mean a mislabelled export), as is a marker with only x or only y.
 
-Accepted .xlsx layout (first worksheet; rows are 1-based)::
-
-    row 1..k   header block, one ``key | value`` pair per row, ended by the first empty row.
-               Required keys (case-insensitive): ``record rate`` (frames/s) and
-               ``calibration`` (mm per pixel, recorded in ``source``). Others are kept.
-    row k+2    column labels: ``Frame | Time | mb1 | | mb2 | | ...`` (a marker label spans
-               its x and y columns, the second cell may be empty or repeat the name);
-               a label may be written ``Feature 1 (mb1)``: the name in brackets is used.
-    row k+3    axis labels: ``| | x | y | x | y ...``
-    row k+4..  data rows; an empty cell or -1/-1 marks a lost marker (NaN).
-
-Times in the .xlsx are seconds; if the time column is empty, time = frame / record rate.
+The tracker's own export, as .xlsx or as CSV (with or without its header block), in every
+variant of ``docs/tracking_export.md``: :mod:`.tracker_export`. Lost markers ((-1, -1) or blank
+cells) are NaN: gaps, never positions.
 """
 from __future__ import annotations
 
@@ -31,8 +22,11 @@ from dataclasses import dataclass, field
 import gzip
 from pathlib import Path
 import re
+import zlib
 
 import numpy as np
+
+from . import tracker_export as te
 
 MIN_FRAMES = 50
 _MARKER_RE = re.compile(r'^(m[ab]\w*?)_([xy])(?:_mm)?$')
@@ -50,6 +44,9 @@ class MarkerTracks:
     frames: np.ndarray
     markers_mm: dict[str, np.ndarray]
     handedness: str = 'left'
+    # The calibration's tilt (degrees): the tracker's axes turned against the image. None
+    # where the file does not state it (a header-less CSV): the markers tell the robot's frame.
+    tilt_deg: float | None = None
     source: dict = field(default_factory=dict)
 
     @property
@@ -75,43 +72,116 @@ class MarkerTracks:
         if len(self.arm_markers) < 2:
             raise TrackFormatError(
                 f'need at least 2 arm markers (ma*), found {self.arm_markers}')
+        if not np.all(np.isfinite(self.time_s)):
+            bad = int(np.nonzero(~np.isfinite(self.time_s))[0][0])
+            raise TrackFormatError(f'time of frame {bad} is not a finite number')
         if np.any(np.diff(self.time_s) <= 0):
-            raise TrackFormatError('time_s must increase strictly')
+            bad = int(np.nonzero(np.diff(self.time_s) <= 0)[0][0])
+            raise TrackFormatError(f'time must increase strictly: frame {bad + 1} is not after '
+                                   f'frame {bad}')
         for name, xy in self.markers_mm.items():
             if xy.shape != (self.n_frames, 2):
                 raise TrackFormatError(f'marker {name}: shape {xy.shape}, expected (n, 2)')
 
 
-def load_tracks(path: str | Path) -> MarkerTracks:
-    """Read a marker file, choosing the reader from the suffix (.csv, .csv.gz, .xlsx)."""
+def load_tracks(path: str | Path, frame_rate_hz: float | None = None,
+                length_unit: str | None = None) -> MarkerTracks:
+    """Read a marker file, choosing the reader from the suffix (.csv, .csv.gz, .xlsx).
+
+    ``frame_rate_hz`` and ``length_unit`` ('mm', 'um' or 'px') state what a tracker export
+    leaves out (``Record Rate: N/A``) or gets wrong (units that contradict the numbers).
+    """
     path = Path(path)
-    if path.suffix.lower() == '.xlsx':
-        return read_marker_xlsx(path)
-    return read_marker_csv(path)
+    if path.suffix.lower() in ('.xlsx', '.xlsm'):
+        return read_marker_xlsx(path, frame_rate_hz, length_unit)
+    return read_marker_csv(path, frame_rate_hz, length_unit)
 
 
-def read_marker_csv(path: str | Path) -> MarkerTracks:
-    path = Path(path)
+def _read_text(path: Path) -> str:
     opener = gzip.open if path.suffix == '.gz' else open
-    with opener(path, 'rt') as f:
-        header = [h.strip() for h in f.readline().strip().split(',')]
-        try:
-            data = np.loadtxt(f, delimiter=',', ndmin=2)
-        except ValueError as exc:
-            raise TrackFormatError(f'{path.name}: non-numeric data ({exc})') from exc
-    if data.shape[1] != len(header):
-        raise TrackFormatError(
-            f'{path.name}: {len(header)} header columns but {data.shape[1]} data columns')
+    try:
+        with opener(path, 'rb') as f:
+            raw = f.read()
+    except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
+        raise TrackFormatError(f'{path.name}: damaged gzip file ({exc})') from exc
+    try:
+        return raw.decode('utf-8-sig')
+    except UnicodeDecodeError as exc:
+        raise TrackFormatError(f'{path.name}: not UTF-8 text (byte {exc.start}: '
+                               f'{exc.reason})') from None
+
+
+def read_marker_csv(path: str | Path, frame_rate_hz: float | None = None,
+                    length_unit: str | None = None) -> MarkerTracks:
+    """The project's CSV (``frame,time_s,mb1_x,...``) or the tracker's CSV export."""
+    path = Path(path)
+    text = _read_text(path)
+    rows = te.read_export_csv_rows(text)
+    if rows and te.looks_like_export(rows[0]):
+        return _from_export(rows, path, 'csv', frame_rate_hz, length_unit)
+    if frame_rate_hz is not None or length_unit is not None:
+        raise TrackFormatError(f'{path.name}: --frame-rate and --length-unit apply to the '
+                               'tracker\'s exports; this file is the project\'s CSV')
+    header = [h.strip() for h in (rows[0] if rows else [])]
+    body = [r for r in rows[1:] if r]
+    if not body:
+        raise TrackFormatError(f'{path.name}: no data rows')
+    ragged = next((k for k, r in enumerate(body) if len(r) != len(header)), None)
+    if ragged is not None:
+        raise TrackFormatError(f'{path.name}: row {ragged + 2} has {len(body[ragged])} columns, '
+                               f'the header {len(header)}')
+    try:
+        data = np.array([[float(v) if v.strip() else np.nan for v in r] for r in body])
+    except ValueError as exc:
+        raise TrackFormatError(f'{path.name}: non-numeric data ({exc})') from exc
     missing = [c for c in ('frame', 'time_s') if c not in header]
     if missing:
         raise TrackFormatError(f'{path.name}: missing column(s) {missing}')
     coord_cols = {h: i for i, h in enumerate(header) if h not in ('frame', 'time_s')}
     markers = _markers_from_columns(coord_cols, data, path.name)
+    for xy in markers.values():
+        xy[np.all(xy == te.LOST_MARKER, axis=1) | np.any(~np.isfinite(xy), axis=1)] = np.nan
     tracks = MarkerTracks(
         time_s=data[:, header.index('time_s')].astype(float),
-        frames=data[:, header.index('frame')].astype(np.int64),
+        frames=_frame_numbers(data[:, header.index('frame')], path.name),
         markers_mm=markers,
         source={'path': str(path), 'format': 'csv'},
+    )
+    tracks.validate()
+    return tracks
+
+
+def _frame_numbers(frames: np.ndarray, fname: str) -> np.ndarray:
+    if not np.all(np.isfinite(frames)) or np.any(np.abs(frames) > 2 ** 53):
+        raise TrackFormatError(f'{fname}: the frame column holds a non-finite or huge value')
+    return frames.astype(np.int64)
+
+
+def read_marker_xlsx(path: str | Path, frame_rate_hz: float | None = None,
+                     length_unit: str | None = None) -> MarkerTracks:
+    """The tracker's .xlsx export (first worksheet), any of its variants."""
+    path = Path(path)
+    try:
+        rows = te.read_export_xlsx_rows(path)
+    except te.ExportFormatError as exc:
+        raise TrackFormatError(str(exc)) from None
+    return _from_export(rows, path, 'xlsx', frame_rate_hz, length_unit)
+
+
+def _from_export(rows: list, path: Path, fmt: str, frame_rate_hz: float | None,
+                 length_unit: str | None) -> MarkerTracks:
+    try:
+        parsed = te.parse_export_rows(rows, path.name, frame_rate_hz, length_unit)
+    except te.ExportFormatError as exc:
+        raise TrackFormatError(str(exc)) from None
+    meta = parsed['meta']
+    tracks = MarkerTracks(
+        time_s=parsed['time_s'], frames=_frame_numbers(parsed['frames'], path.name),
+        markers_mm=parsed['markers_mm'],
+        handedness=meta.get('calibration_handedness', 'left'),
+        tilt_deg=meta.get('calibration_tilt_deg'),
+        source={'path': str(path), 'format': fmt,
+                **{k: v for k, v in meta.items() if not isinstance(v, tuple)}},
     )
     tracks.validate()
     return tracks
@@ -134,97 +204,3 @@ def _markers_from_columns(coord_cols: dict[str, int], data: np.ndarray,
         raise TrackFormatError(f'{fname}: missing column(s) {sorted(incomplete)}')
     return {n: np.column_stack([data[:, ax['x']], data[:, ax['y']]]).astype(float)
             for n, ax in sorted(axes.items())}
-
-
-def read_marker_xlsx(path: str | Path) -> MarkerTracks:
-    from openpyxl import load_workbook
-
-    path = Path(path)
-    wb = load_workbook(path, read_only=True, data_only=True)
-    try:
-        rows = list(wb.worksheets[0].iter_rows(values_only=True))
-    finally:
-        wb.close()
-    meta, start = _read_header_block(rows, path.name)
-    if len(rows) < start + 2:
-        raise TrackFormatError(f'{path.name}: no column label rows after the header block')
-    labels, axis_row = rows[start], rows[start + 1]
-    cols = _xlsx_columns(labels, axis_row, path.name)
-    body = [r for r in rows[start + 2:] if r and any(v is not None for v in r)]
-    data = np.array([[_num(r[i]) if i < len(r) else np.nan for i in range(len(labels))]
-                     for r in body], dtype=float).reshape(len(body), len(labels))
-    frames = data[:, cols['frame']]
-    time_s = data[:, cols['time']]
-    if np.all(np.isnan(time_s)):
-        time_s = frames / meta['record rate']
-    markers = {}
-    for name, (ix, iy) in cols['markers'].items():
-        xy = data[:, [ix, iy]]
-        xy[np.all(xy == -1, axis=1)] = np.nan
-        markers[name] = xy
-    tracks = MarkerTracks(
-        time_s=time_s, frames=frames.astype(np.int64), markers_mm=markers,
-        source={'path': str(path), 'format': 'xlsx', **meta},
-    )
-    tracks.validate()
-    return tracks
-
-
-def _num(v) -> float:
-    if v is None or v == '':
-        return np.nan
-    try:
-        return float(v)
-    except (TypeError, ValueError):
-        return np.nan
-
-
-def _read_header_block(rows: list, fname: str) -> tuple[dict, int]:
-    meta: dict = {}
-    blank = [i for i, row in enumerate(rows) if not row or all(v is None for v in row)]
-    if not blank:
-        raise TrackFormatError(f'{fname}: header block is not ended by an empty row')
-    end = blank[0]
-    for row in rows[:end]:
-        key = str(row[0]).strip().lower().rstrip(':')
-        meta[key] = row[1] if len(row) > 1 else None
-    missing = [k for k in ('record rate', 'calibration') if k not in meta]
-    if missing:
-        raise TrackFormatError(f'{fname}: header block lacks {missing}')
-    for k in ('record rate', 'calibration'):
-        try:
-            meta[k] = float(meta[k])
-        except (TypeError, ValueError) as exc:
-            raise TrackFormatError(f'{fname}: header {k!r} is not a number') from exc
-    return meta, end + 1
-
-
-def _xlsx_columns(labels: tuple, axis_row: tuple, fname: str) -> dict:
-    names = [str(v).strip() if v is not None else '' for v in labels]
-    lower = [n.lower() for n in names]
-    missing = [c for c in ('frame', 'time') if c not in lower]
-    if missing:
-        raise TrackFormatError(f'{fname}: missing column(s) {missing}')
-    markers: dict[str, list] = {}
-    current = None
-    for i, label in enumerate(names):
-        if lower[i] in ('frame', 'time'):
-            current = None
-            continue
-        bracket = re.search(r'\((m[ab]\w*)\)', label)
-        name = bracket.group(1) if bracket else label
-        if name:
-            if not re.fullmatch(r'm[ab]\w*', name):
-                raise TrackFormatError(f'{fname}: unexpected column {label!r}')
-            current = name
-        if current is None:
-            continue
-        axis = str(axis_row[i]).strip().lower() if i < len(axis_row) and axis_row[i] else ''
-        if axis in ('x', 'y'):
-            markers.setdefault(current, [None, None])['xy'.index(axis)] = i
-    incomplete = [f'{n}_{a}' for n, ix in markers.items() for a, j in zip('xy', ix, strict=True)
-                  if j is None]
-    if incomplete:
-        raise TrackFormatError(f'{fname}: missing column(s) {sorted(incomplete)}')
-    return {'frame': lower.index('frame'), 'time': lower.index('time'),
-            'markers': {n: tuple(ix) for n, ix in sorted(markers.items())}}
