@@ -7,7 +7,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mantis_rig.analysis import analyze_tracks, load_tracks  # noqa: E402
 
-DATA = Path(__file__).resolve().parents[2] / 'shared' / 'data' / \
+DATA = Path(__file__).resolve().parents[1] / 'test' / 'data' / \
     'air_23mm_2p3mmps_trial1_markers.csv.gz'
 
 

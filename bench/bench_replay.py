@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/bench_replay.py [--realtime]
 
-1. Imports ../shared/data's trial (65,255 frames at 19,000 frames/s) into a bag, then times
+1. Imports test/data's real trial (65,255 frames at 19,000 frames/s) into a bag, then times
    reading the bag (marker blocks -> MarkerTracks) and the analysis (goal: < 2 s together).
 2. Replays a synthetic 10 s trial bag (every topic of the trial contract at rig rates, ~3,300
    messages) at --rate 10 while a subscriber process receives them: achieved rate, lateness of
@@ -23,7 +23,7 @@ import numpy as np  # noqa: E402
 
 from mantis_rig.ros_env import claim_local_domain  # noqa: E402
 
-DATA = Path(__file__).resolve().parents[2] / 'shared' / 'data' / \
+DATA = Path(__file__).resolve().parents[1] / 'test' / 'data' / \
     'air_23mm_2p3mmps_trial1_markers.csv.gz'
 SUBSCRIBER = '''
 import sys, time, rclpy

@@ -1,6 +1,7 @@
 """`mantis replay`, `mantis import-tracking`, `mantis analyze`, `mantis recover`."""
 from __future__ import annotations
 
+import argparse
 import json
 import math
 from pathlib import Path
@@ -8,8 +9,6 @@ import sys
 import threading
 
 USAGE_ERROR = 2
-#: The strike counts as recorded once the tip speed has fallen below this share of its peak.
-STRIKE_END_SHARE = 0.5
 
 
 def _err(command, text):
@@ -81,6 +80,47 @@ def _add_condition_options(parser) -> None:
                              'counts from the latch)')
 
 
+# ------------------------------------------------------- what a tracker export leaves out
+def _positive_float(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a number') from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f'{text!r}: must be a positive number')
+    return value
+
+
+def _positive_int(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a whole number') from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f'{text!r}: must be 1 or more')
+    return value
+
+
+#: analysis.tracker_export.LENGTH_UNITS, written out: building the parser imports no analysis.
+LENGTH_UNITS = ('mm', 'um', 'px')
+
+
+def _add_export_options(parser) -> None:
+    parser.add_argument('--frame-rate', type=_positive_float, metavar='FPS',
+                        help='frames per second of a tracker export whose Record Rate is N/A '
+                             '(and whose trial name carries none, like "11kfps"); not for bags')
+    parser.add_argument('--length-unit', choices=LENGTH_UNITS,
+                        help='the unit the export\'s coordinates are really in, overriding its '
+                             'Export Units (px: converted by the calibration\'s mm/pixel); '
+                             'not for bags')
+
+
+def export_options(args) -> dict:
+    """--frame-rate and --length-unit as load_tracks's keyword arguments."""
+    return {'frame_rate_hz': getattr(args, 'frame_rate', None),
+            'length_unit': getattr(args, 'length_unit', None)}
+
+
 def given_conditions(args) -> dict:
     """The trial conditions given as options, checked against their ranges (ConditionError)."""
     from .nodes.trial_conditions import ConditionError, check_value
@@ -110,7 +150,7 @@ def run_import(args) -> int:
         _err('import-tracking', exc)
         return USAGE_ERROR
     try:
-        tracks = load_tracks(args.file)
+        tracks = load_tracks(args.file, **export_options(args))
     except TrackFormatError as exc:
         _err('import-tracking', exc)
         return USAGE_ERROR
@@ -142,13 +182,6 @@ def _json_safe(value):
     if isinstance(value, (list, tuple)):
         return [_json_safe(v) for v in value]
     return value
-
-
-def strike_recorded(analysis) -> bool:
-    """True if the tip speed falls below STRIKE_END_SHARE of its peak after the peak."""
-    i = analysis.phases.index_peak
-    tip = analysis.tip_speed_mps
-    return bool(i < len(tip) - 1 and tip[i + 1:].min() < STRIKE_END_SHARE * tip[i])
 
 
 def analysis_report(analysis, trial, path, parameters=()) -> dict:
@@ -197,8 +230,18 @@ def _print_text(report):
 
 
 def run_analyze(args) -> int:
+    """One path without --table: that trial, reported in full. --table or several paths:
+    the batch (directories searched for trials), one row per trial in the table."""
+    if args.table is not None or len(args.paths) > 1:
+        return run_analyze_batch(args)
+    args.path = args.paths[0]
+    return _analyze_one(args)
+
+
+def _analyze_one(args) -> int:
     from .analysis import TrackFormatError, analyze_tracks
     from .analysis.bag_input import is_bag_path, load_trial_input
+    from .analysis.batch import STRIKE_END_SHARE, strike_recorded
     from .analysis.conditions import params_for_trial
     from .nodes.trial_conditions import ConditionError
     from .recording import BagError
@@ -209,8 +252,13 @@ def run_analyze(args) -> int:
         _err('analyze', exc)
         return USAGE_ERROR
     bag = is_bag_path(args.path)
+    options = export_options(args)
+    if bag and any(v is not None for v in options.values()):
+        _err('analyze', f'{args.path} is a bag: --frame-rate and --length-unit apply to '
+                        'tracking files only (a bag states its own)')
+        return USAGE_ERROR
     try:
-        trial = load_trial_input(args.path)
+        trial = load_trial_input(args.path, **options)
     except (BagError, TrackFormatError, OSError) as exc:
         _err('analyze', exc)
         return 1 if bag else USAGE_ERROR
@@ -249,6 +297,70 @@ def run_analyze(args) -> int:
     return 0
 
 
+def run_analyze_batch(args) -> int:
+    """Every trial the paths name, analysed in parallel, one row each in the --table CSV."""
+    from .analysis.batch import Progress, expand_paths, is_bag_dir, run_batch, write_table
+    from .nodes.trial_conditions import ConditionError
+
+    if args.json or args.plot:
+        _err('analyze', '--json and --plot apply to one trial; a batch (several paths or '
+                        '--table) writes its table (--table FILE.csv, or - for stdout)')
+        return USAGE_ERROR
+    try:
+        given = given_conditions(args)
+    except ConditionError as exc:
+        _err('analyze', exc)
+        return USAGE_ERROR
+    table = args.table if args.table is not None else '-'
+    to_stdout = table == '-'
+    if not to_stdout and not Path(table).resolve().parent.is_dir():
+        _err('analyze', f'--table {table}: no such directory {Path(table).parent}')
+        return USAGE_ERROR
+    if not to_stdout and Path(table).is_dir():
+        _err('analyze', f'--table {table} is a directory: name the CSV file to write')
+        return USAGE_ERROR
+    trials, notes = expand_paths(args.paths, exclude=() if to_stdout else (table,))
+    for note in notes:
+        _err('analyze', f'warning: {note}')
+    if not trials:
+        _err('analyze', 'no trials to analyse')
+        return USAGE_ERROR
+    options = export_options(args)
+    if any(v is not None for v in options.values()):
+        bags = [str(t) for t in trials if t.suffix == '.mcap' or is_bag_dir(t)]
+        if bags:
+            _err('analyze', f'--frame-rate and --length-unit apply to tracking files only; '
+                            f'these are bags (a bag states its own): {", ".join(bags)}')
+            return USAGE_ERROR
+    progress = Progress(len(trials))
+    try:
+        rows = run_batch(trials, given, jobs=args.jobs, on_done=progress, **options)
+    except KeyboardInterrupt:
+        progress.close()
+        _err('analyze', 'interrupted; no table written')
+        return 130
+    progress.close()
+    where = 'the table on stdout' if to_stdout else table
+    try:
+        if to_stdout:
+            write_table(rows, sys.stdout)
+            sys.stdout.flush()
+        else:
+            with open(table, 'w', newline='', encoding='utf-8') as f:
+                write_table(rows, f)
+    except OSError as exc:
+        _err('analyze', f'--table {table}: {exc}')
+        return 1
+    refused = sum(row['status'] != 'ok' for row in rows)
+    analysed = len(rows) - refused
+    if refused:
+        print(f'{analysed} of {len(rows)} trials analysed; {refused} refused: see the reason '
+              f'column in {where}', file=sys.stderr)
+        return 1
+    print(f'{analysed} of {len(rows)} trials analysed: {where}', file=sys.stderr)
+    return 0
+
+
 # --------------------------------------------------------------------------------- recover
 def run_recover(args) -> int:
     from .recording import main_recover
@@ -277,22 +389,33 @@ def add_commands(commands) -> None:
 
     imp = commands.add_parser(
         'import-tracking', help='tracked video (CSV / .xlsx) -> trial bag',
-        description='Write marker tracks (CSV like ../shared/data, or the tracking '
-                    'software\'s .xlsx export) and the derived θ1(t), θ3(t) into a bag.')
+        description='Write marker tracks (the project\'s CSV, or the tracking software\'s '
+                    '.xlsx or CSV export) and the derived θ1(t), θ3(t) into a bag.')
     imp.add_argument('file', help='.csv, .csv.gz or .xlsx')
     imp.add_argument('--out', required=True, help='new bag directory')
     _add_condition_options(imp)
+    _add_export_options(imp)
     imp.add_argument('--no-angles', action='store_true',
                      help='write only the marker frames (no /analysis/joint_angles)')
     imp.set_defaults(run=run_import)
 
     ana = commands.add_parser(
-        'analyze', help='phases, speeds and energies of a trial',
-        description='Analyse a trial bag (directory or .mcap) or a tracking file.')
-    ana.add_argument('path', metavar='BAG_OR_TRACKING_FILE')
+        'analyze', help='phases, speeds and energies of a trial, or of many (--table)',
+        description='Analyse a trial bag (directory or .mcap) or a tracking file. With '
+                    '--table or several paths: analyse every trial they name (directories are '
+                    'searched recursively for tracking files *.xlsx, *.csv, *.csv.gz and for '
+                    'bags) in parallel and write one row per trial to a CSV table; exit 1 if '
+                    'any trial was refused (its row says why).')
+    ana.add_argument('paths', nargs='+', metavar='BAG_OR_TRACKING_FILE_OR_DIR')
     ana.add_argument('--json', action='store_true', help='print the summary as JSON')
     ana.add_argument('--plot', metavar='FILE.png', help='write the trial figure')
+    ana.add_argument('--table', metavar='FILE.csv',
+                     help='batch: write one row per trial to this CSV table (- for stdout, '
+                          'the default when several paths are given without --table)')
+    ana.add_argument('--jobs', type=_positive_int, default=None, metavar='N',
+                     help='batch: trials analysed at once (default: one per core)')
     _add_condition_options(ana)
+    _add_export_options(ana)
     ana.set_defaults(run=run_analyze)
 
     rec = commands.add_parser(

@@ -4,8 +4,12 @@ Each test claims a domain of its own (a lock no parallel pytest run can take) be
 any ROS context or process, and gives it back afterwards. A domain per test, not per session:
 a participant that outlives its test (rclpy destroys the DDS participant only when its context
 is collected) must not answer the next test's service calls.
+
+The real trials the tests read are the project's own copies under test/data (``data_file``);
+a missing one fails the test that needs it, it is never skipped.
 """
 import os
+from pathlib import Path
 
 import pytest
 
@@ -14,6 +18,16 @@ from mantis_rig.ros_env import claim_free_domain, release_domain
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
 
+#: The project's own copies of the real trials (test/data/PROVENANCE.md says where from).
+DATA_DIR = Path(__file__).resolve().parent / 'data'
+
+
+def data_file(rel) -> Path:
+    """A fixture file under test/data; a missing one fails the test (it is never skipped)."""
+    path = DATA_DIR / rel
+    assert path.exists(), f'test fixture missing: {path}'
+    return path
+
 
 @pytest.fixture(autouse=True)
 def own_ros_domain(monkeypatch):
@@ -21,3 +35,11 @@ def own_ros_domain(monkeypatch):
     monkeypatch.setenv('ROS_DOMAIN_ID', str(domain))
     yield domain
     release_domain(domain)
+
+
+def authors_values() -> dict:
+    """{file under test/data: the authors' values for it} (test/data/authors_values.csv)."""
+    import csv
+    with open(data_file('authors_values.csv'), newline='') as f:
+        return {row.pop('file'): {k: (v if k == 'medium' else float(v)) for k, v in row.items()}
+                for row in csv.DictReader(f)}

@@ -1,15 +1,12 @@
-"""The analysis on the one real trial, against the authors' derived values (data/README.md)."""
-from pathlib import Path
-
+"""The analysis on the one real trial, against the authors' derived values
+(test/data/PROVENANCE.md)."""
+from conftest import data_file
 import numpy as np
 import pytest
 
 from mantis_rig.analysis import analyze_tracks, load_tracks
 
-DATA = (Path(__file__).resolve().parents[1] / '..' / 'shared' / 'data'
-        / 'air_23mm_2p3mmps_trial1_markers.csv.gz').resolve()
-
-pytestmark = pytest.mark.skipif(not DATA.exists(), reason=f'reference trial absent: {DATA}')
+DATA = data_file('air_23mm_2p3mmps_trial1_markers.csv.gz')
 
 
 @pytest.fixture(scope='module')

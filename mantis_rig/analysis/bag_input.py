@@ -45,11 +45,19 @@ def is_bag_path(path) -> bool:
     return path.is_dir() or path.suffix == '.mcap'
 
 
-def load_trial_input(path) -> TrialInput:
-    """A trial bag (directory or .mcap) or a tracking file (.csv, .csv.gz, .xlsx)."""
+def load_trial_input(path, frame_rate_hz: float | None = None,
+                     length_unit: str | None = None) -> TrialInput:
+    """A trial bag (directory or .mcap) or a tracking file (.csv, .csv.gz, .xlsx).
+
+    ``frame_rate_hz`` and ``length_unit`` go to :func:`load_tracks` (what a tracker export
+    leaves out or gets wrong); a bag states both itself, so with a bag they are a ValueError.
+    """
     if is_bag_path(path):
+        if frame_rate_hz is not None or length_unit is not None:
+            raise ValueError(f'{path}: the frame rate and length unit apply to tracking files; '
+                             'a bag states its own')
         return read_trial_bag(path)
-    return TrialInput(tracks=load_tracks(path))
+    return TrialInput(tracks=load_tracks(path, frame_rate_hz, length_unit))
 
 
 def _frame_numbers(time_s: np.ndarray) -> np.ndarray:

@@ -173,10 +173,10 @@ def _header_block(rows: list[list]) -> dict:
         if not row:
             continue
         label = _text(row[0])
-        if not label.endswith(':'):
-            continue                      # a section title ("Test Data", "Calibration(s)")
-        key = label[:-1].strip().lower()
         values = [v for v in row[1:] if _text(v)]
+        if not label or (not label.endswith(':') and not values):
+            continue                      # a section title ("Test Data", "Calibration(s)")
+        key = label.rstrip(':').strip().lower()
         if key == 'date':                 # "Date: | d | | Time: | t"
             meta['date'] = _text(values[0]) if values else ''
             if len(values) >= 3 and _text(values[1]).lower().startswith('time'):
