@@ -239,10 +239,9 @@ def run_analyze(args) -> int:
 
 
 def _analyze_one(args) -> int:
-    from .analysis import TrackFormatError, analyze_tracks
+    from .analysis import TrackFormatError
     from .analysis.bag_input import is_bag_path, load_trial_input
-    from .analysis.batch import STRIKE_END_SHARE, strike_recorded
-    from .analysis.conditions import params_for_trial
+    from .analysis.batch import TrialRefused, analyse_trial
     from .nodes.trial_conditions import ConditionError
     from .recording import BagError
 
@@ -262,30 +261,17 @@ def _analyze_one(args) -> int:
     except (BagError, TrackFormatError, OSError) as exc:
         _err('analyze', exc)
         return 1 if bag else USAGE_ERROR
-    last = float(trial.tracks.time_s[-1])
     if trial.problems:
         _err('analyze', f'warning: {args.path} is damaged: {"; ".join(trial.problems)}')
         _err('analyze', f'warning: analysing the {trial.tracks.n_frames} frames recorded '
-                        f'before the damage (up to t = {last:.4f} s)')
-    params, parameters = params_for_trial(trial.conditions, given=given)
-    if trial.force_N is not None:
-        params.tendon_force_N, params.tendon_force_time_s = trial.force_N, trial.force_time_s
+                        f'before the damage (up to t = {float(trial.tracks.time_s[-1]):.4f} s)')
     try:
-        analysis = analyze_tracks(trial.tracks, params)
-    except (ValueError, IndexError) as exc:
-        if trial.truncated:
-            _err('analyze', f'{args.path}: not enough data before the damage: the data end at '
-                            f't = {last:.4f} s: {exc}')
-        else:
-            _err('analyze', f'{args.path}: analysis failed: {exc}')
+        analysis, warned, parameters = analyse_trial(trial, given)
+    except TrialRefused as exc:
+        _err('analyze', f'{args.path}: {exc}')
         return 1
-    if not strike_recorded(analysis):
-        why = (f'the data end at t = {last:.4f} s, before the strike is over (the tip speed '
-               f'never falls below {STRIKE_END_SHARE:.0%} of its peak after it)')
-        if trial.truncated:
-            _err('analyze', f'{args.path}: not enough data before the damage: {why}')
-            return 1
-        _err('analyze', f'warning: {why}; phase times and peaks are not reliable')
+    for text in warned:
+        _err('analyze', f'warning: {text}')
     report = analysis_report(analysis, trial, args.path, parameters)
     if args.plot:
         from .analysis.plots import plot_trial

@@ -57,6 +57,37 @@ def strike_recorded(analysis) -> bool:
     return bool(i < len(tip) - 1 and tip[i + 1:].min() < STRIKE_END_SHARE * tip[i])
 
 
+class TrialRefused(ValueError):
+    """A trial that was read but cannot be analysed; the message says why."""
+
+
+def analyse_trial(trial, given: dict | None = None) -> tuple:
+    """(analysis, warnings, where the parameters came from) of a trial that was read
+    (:class:`bag_input.TrialInput`), as ``mantis analyze`` analyses it: its conditions (and
+    ``given``, stated by the user) set the parameters, recorded force gives the tendon's work.
+    Raises :class:`TrialRefused` if it cannot be analysed, or if a damaged trial's data end
+    before the strike is over; an undamaged trial that ends too early is analysed with a
+    warning."""
+    tracks = trial.tracks
+    last = float(tracks.time_s[-1])
+    params, sources = params_for_trial(trial.conditions, given=given or {})
+    if trial.force_N is not None:
+        params.tendon_force_N, params.tendon_force_time_s = trial.force_N, trial.force_time_s
+    try:
+        analysis = analyze_tracks(tracks, params)
+    except (ValueError, IndexError) as exc:
+        raise TrialRefused(
+            f'not enough data before the damage: the data end at t = {last:.4f} s: {exc}'
+            if trial.truncated else f'analysis failed: {exc}') from exc
+    if strike_recorded(analysis):
+        return analysis, [], sources
+    why = (f'the data end at t = {last:.4f} s, before the strike is over (the tip speed '
+           f'never falls below {STRIKE_END_SHARE:.0%} of its peak after it)')
+    if trial.truncated:
+        raise TrialRefused(f'not enough data before the damage: {why}')
+    return analysis, [f'{why}; phase times and peaks are not reliable'], sources
+
+
 # ------------------------------------------------------------------------------ the trials
 def is_bag_dir(path) -> bool:
     """A directory holding a bag: its ``metadata.yaml``, or ``.mcap`` files without one."""
@@ -180,26 +211,14 @@ def _analyse(path: Path, trial, given: dict, notes: list) -> dict:
     """The row of a trial that was read; ``notes`` collects its warnings."""
     tracks = trial.tracks
     known = _what_was_read(path, trial)
-    last = float(tracks.time_s[-1])
     if trial.problems:
         notes.append(f'damaged: {"; ".join(trial.problems)}; analysed the {tracks.n_frames} '
-                     f'frames before the damage (to t = {last:.4f} s)')
-    params, _ = params_for_trial(trial.conditions, given=given)
-    if trial.force_N is not None:
-        params.tendon_force_N, params.tendon_force_time_s = trial.force_N, trial.force_time_s
+                     f'frames before the damage (to t = {float(tracks.time_s[-1]):.4f} s)')
     try:
-        analysis = analyze_tracks(tracks, params)
-    except (ValueError, IndexError) as exc:
-        reason = (f'not enough data before the damage: the data end at t = {last:.4f} s: {exc}'
-                  if trial.truncated else f'analysis failed: {exc}')
-        return _row(path, status=REFUSED, reason=reason, **known)
-    if not strike_recorded(analysis):
-        why = (f'the data end at t = {last:.4f} s, before the strike is over (the tip speed '
-               f'never falls below {STRIKE_END_SHARE:.0%} of its peak after it)')
-        if trial.truncated:
-            return _row(path, status=REFUSED, reason=f'not enough data before the damage: '
-                        f'{why}', **known)
-        notes.append(f'{why}; phase times and peaks are not reliable')
+        analysis, warned, _ = analyse_trial(trial, given)
+    except TrialRefused as exc:
+        return _row(path, status=REFUSED, reason=str(exc), **known)
+    notes.extend(warned)
     summary = analysis.summary()
     values = {k: summary[k] for k in _SUMMARY_COLUMNS}
     values.update({f'phase_{p}_start_s': summary['phase_start_s'][p] for p in PHASES})

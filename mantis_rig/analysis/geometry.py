@@ -266,7 +266,7 @@ def complete_rigid_markers(points: np.ndarray, min_markers: int = 2,
         if full.sum() >= MIN_SHAPE_FRAMES or len(kept) <= min_markers:
             break
         kept.pop(int(np.argmin(seen.sum(axis=0))))
-    if full.sum() < min(MIN_SHAPE_FRAMES, 3) or len(kept) < min_markers:
+    if full.sum() < 3 or len(kept) < min_markers:     # no shape to place the markers with
         return sub, np.zeros(len(sub), bool), kept
     out = sub.copy()
     if full.all():

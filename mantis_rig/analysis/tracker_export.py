@@ -37,8 +37,9 @@ _RATE_IN_NAME = re.compile(r'(?<![0-9a-z])(\d+(?:[.p]\d+)?)\s*kfps', re.IGNORECA
 _FEATURE = re.compile(r'\(([^()]*)\)\s*$')
 
 
-class ExportFormatError(ValueError):
-    """The rows are not a tracker export this reader can read, or contradict themselves."""
+class TrackFormatError(ValueError):
+    """A tracking file does not have a layout the readers accept, or contradicts itself (this
+    module's and :mod:`.tracking`'s one error for bad tracking files)."""
 
 
 def is_export_header(cells: list) -> bool:
@@ -84,6 +85,14 @@ def parse_calibration(text: str) -> dict:
     return out
 
 
+def lost_as_gaps(xy: np.ndarray) -> np.ndarray:
+    """(n, 2) positions with every lost frame NaN in both coordinates: the tracker's (-1, -1),
+    a blank or a non-finite cell."""
+    xy = np.array(xy, float)
+    xy[np.all(xy == LOST_MARKER, axis=1) | np.any(~np.isfinite(xy), axis=1)] = np.nan
+    return xy
+
+
 def rate_from_name(name: str) -> float | None:
     """Frames per second from a trial name such as ``111319_11kfps_T_2X_A_2_1_2p3_-10_5_2``."""
     m = _RATE_IN_NAME.search(name or '')
@@ -98,34 +107,31 @@ def parse_export_rows(rows: list[list], fname: str, frame_rate_hz: float | None 
     """
     start = next((i for i, r in enumerate(rows) if is_export_header(r)), None)
     if start is None:
-        raise ExportFormatError(f'{fname}: no column header row "Frame, Time, Feature 1 (...)"')
+        raise TrackFormatError(f'{fname}: no column header row "Frame, Time, Feature 1 (...)"')
     meta = _header_block(rows[:start])
     if start + 1 >= len(rows):
-        raise ExportFormatError(f'{fname}: no x/y row under the column header')
+        raise TrackFormatError(f'{fname}: no x/y row under the column header')
     columns, ignored = _marker_columns(rows[start], rows[start + 1], fname)
     table = _numeric_table(rows[start + 2:], fname, start + 3)
     if len(table) == 0:
-        raise ExportFormatError(f'{fname}: no data rows under the column header')
+        raise TrackFormatError(f'{fname}: no data rows under the column header')
     width = table.shape[1]
     needed = max(max(ix, iy) for ix, iy in columns.values())
     if needed >= width:
-        raise ExportFormatError(f'{fname}: the data rows have {width} columns, the header '
+        raise TrackFormatError(f'{fname}: the data rows have {width} columns, the header '
                                 f'names {needed + 1}')
     frames = table[:, 0]
     raw_time = table[:, 1]
     for what, col in (('Frame', frames), ('Time', raw_time)):
         bad = np.nonzero(~np.isfinite(col))[0]
         if len(bad):
-            raise ExportFormatError(f'{fname}: row {start + 3 + int(bad[0])}: {what} is not a '
+            raise TrackFormatError(f'{fname}: row {start + 3 + int(bad[0])}: {what} is not a '
                                     'number')
     time_s, rate_note = _time_base(meta, frames, raw_time, fname, frame_rate_hz)
     to_mm, unit_note = _length_scale(meta, fname, length_unit)
     markers = {}
     for name, (ix, iy) in columns.items():
-        xy = table[:, [ix, iy]].copy()
-        lost = np.all(xy == LOST_MARKER, axis=1) | np.any(~np.isfinite(xy), axis=1)
-        xy[lost] = np.nan
-        markers[name] = xy * to_mm
+        markers[name] = lost_as_gaps(table[:, [ix, iy]]) * to_mm
     meta.update(rate_note)
     meta.update(unit_note)
     if ignored:
@@ -134,7 +140,7 @@ def parse_export_rows(rows: list[list], fname: str, frame_rate_hz: float | None 
 
 
 def read_export_xlsx_rows(path: Path) -> list[list]:
-    """The first worksheet's rows, as lists; damage is an ExportFormatError naming the file."""
+    """The first worksheet's rows, as lists; damage is an TrackFormatError naming the file."""
     import zipfile
 
     from openpyxl import load_workbook
@@ -142,24 +148,30 @@ def read_export_xlsx_rows(path: Path) -> list[list]:
         wb = load_workbook(path, read_only=True, data_only=True)
     except (zipfile.BadZipFile, KeyError, OSError, ValueError, TypeError, IndexError,
             EOFError) as exc:
-        raise ExportFormatError(f'{path.name}: not a readable .xlsx workbook ({exc})') from exc
+        raise TrackFormatError(f'{path.name}: not a readable .xlsx workbook ({exc})') from exc
     except Exception as exc:       # openpyxl lets the XML parser's own errors through
-        raise ExportFormatError(f'{path.name}: damaged .xlsx ({type(exc).__name__}: '
+        raise TrackFormatError(f'{path.name}: damaged .xlsx ({type(exc).__name__}: '
                                 f'{exc})') from exc
     try:
         if not wb.worksheets:
-            raise ExportFormatError(f'{path.name}: the workbook has no worksheet')
+            raise TrackFormatError(f'{path.name}: the workbook has no worksheet')
         try:
             return [list(r) for r in wb.worksheets[0].iter_rows(values_only=True)]
         except Exception as exc:
-            raise ExportFormatError(f'{path.name}: damaged worksheet ({type(exc).__name__}: '
+            raise TrackFormatError(f'{path.name}: damaged worksheet ({type(exc).__name__}: '
                                     f'{exc})') from exc
     finally:
         wb.close()
 
 
-def read_export_csv_rows(text: str) -> list[list]:
-    return [row for row in csv.reader(io.StringIO(text))]
+def read_export_csv_rows(text: str, fname: str) -> list[list]:
+    """The rows of a CSV text (any line endings); a malformed one is a TrackFormatError."""
+    reader = csv.reader(io.StringIO(text, newline=''))
+    try:
+        return list(reader)
+    except csv.Error as exc:
+        raise TrackFormatError(f'{fname}: not a readable CSV at line {reader.line_num} '
+                               f'({exc})') from None
 
 
 # ------------------------------------------------------------------------------- internals
@@ -204,7 +216,7 @@ def _marker_columns(labels: list, axes: list, fname: str) -> tuple[dict, list[st
             if re.fullmatch(r'm[ab]\w*', name, re.IGNORECASE):
                 current = name.lower()
                 if current in columns:
-                    raise ExportFormatError(f'{fname}: marker {current} appears twice')
+                    raise TrackFormatError(f'{fname}: marker {current} appears twice')
                 columns[current] = [None, None]
             else:
                 current = None
@@ -217,7 +229,7 @@ def _marker_columns(labels: list, axes: list, fname: str) -> tuple[dict, list[st
     incomplete = sorted(f'{n} {a}' for n, ix in columns.items()
                         for a, j in zip('xy', ix, strict=True) if j is None)
     if incomplete:
-        raise ExportFormatError(f'{fname}: no column for {incomplete} (the row under the column '
+        raise TrackFormatError(f'{fname}: no column for {incomplete} (the row under the column '
                                 'header must label each marker\'s x and y)')
     return {n: (ix[0], ix[1]) for n, ix in sorted(columns.items())}, ignored
 
@@ -242,7 +254,7 @@ def _numeric_table(rows: list[list], fname: str, first_row: int) -> np.ndarray:
             body.append([_cell_number(v) for v in row])
         except (TypeError, ValueError):
             bad = next(v for v in row if not _is_number(v))
-            raise ExportFormatError(f'{fname}: row {first_row + k}: {bad!r} is not a '
+            raise TrackFormatError(f'{fname}: row {first_row + k}: {bad!r} is not a '
                                     'number') from None
     if not body:
         return np.empty((0, 0))
@@ -275,13 +287,13 @@ def _time_base(meta: dict, frames: np.ndarray, raw_time: np.ndarray, fname: str,
         try:
             rate = float(stated)
         except ValueError:
-            raise ExportFormatError(f'{fname}: Record Rate {stated!r} is not a number') from None
+            raise TrackFormatError(f'{fname}: Record Rate {stated!r} is not a number') from None
         if not (math.isfinite(rate) and rate > 0):
-            raise ExportFormatError(f'{fname}: Record Rate {stated!r} is not a positive rate')
+            raise TrackFormatError(f'{fname}: Record Rate {stated!r} is not a positive rate')
     frame_numbers = stated is not None and rate is None      # "N/A": Time holds frame numbers
     if frame_rate_hz is not None:
         if rate is not None and abs(rate - frame_rate_hz) > 1e-6 * rate:
-            raise ExportFormatError(f'{fname}: --frame-rate {frame_rate_hz:g} contradicts the '
+            raise TrackFormatError(f'{fname}: --frame-rate {frame_rate_hz:g} contradicts the '
                                     f'file\'s Record Rate {rate:g} frames/s')
         rate, source = float(frame_rate_hz), 'given'
     elif rate is not None:
@@ -291,7 +303,7 @@ def _time_base(meta: dict, frames: np.ndarray, raw_time: np.ndarray, fname: str,
         rate = rate_from_name(_trial_name(meta, fname))
     if frame_numbers or (stated is None and np.array_equal(raw_time, frames)):
         if rate is None:
-            raise ExportFormatError(
+            raise TrackFormatError(
                 f'{fname}: the frame rate is not stated (Record Rate: N/A, the Time column '
                 'holds frame numbers) and the trial name carries none (like "11kfps"): give '
                 'it with --frame-rate FPS')
@@ -312,11 +324,11 @@ def _length_scale(meta: dict, fname: str, length_unit: str | None) -> tuple[floa
     cal_units = meta.get('calibration_units', 'millimeters')
     if length_unit is not None:
         if length_unit not in LENGTH_UNITS:
-            raise ExportFormatError(f'length unit {length_unit!r}: expected one of '
+            raise TrackFormatError(f'length unit {length_unit!r}: expected one of '
                                     f'{LENGTH_UNITS}')
         if length_unit == 'px':
             if per_pixel is None:
-                raise ExportFormatError(f'{fname}: --length-unit px needs the calibration\'s '
+                raise TrackFormatError(f'{fname}: --length-unit px needs the calibration\'s '
                                         'millimetres per pixel, and the file states none')
             scale = per_pixel * UNIT_MM.get(cal_units, 1.0)
         else:
@@ -327,14 +339,14 @@ def _length_scale(meta: dict, fname: str, length_unit: str | None) -> tuple[floa
         return 1.0, {'length_unit': 'mm', 'length_unit_source': 'default (no Export Units)'}
     if unit in ('pixels', 'pixel', 'px'):
         if per_pixel is None:
-            raise ExportFormatError(f'{fname}: Export Units are Pixels but no calibration '
+            raise TrackFormatError(f'{fname}: Export Units are Pixels but no calibration '
                                     'states the millimetres per pixel')
         cal_scale = UNIT_MM.get(cal_units)
         if cal_scale is None:
-            raise ExportFormatError(f'{fname}: unknown Calibration Units {cal_units!r}')
+            raise TrackFormatError(f'{fname}: unknown Calibration Units {cal_units!r}')
         return per_pixel * cal_scale, {'length_unit': 'px', 'length_unit_source': 'Export Units'}
     scale = UNIT_MM.get(unit)
     if scale is None:
-        raise ExportFormatError(f'{fname}: unknown Export Units {meta.get("export units")!r} '
+        raise TrackFormatError(f'{fname}: unknown Export Units {meta.get("export units")!r} '
                                 '(expected Millimeters, Micrometers or Pixels)')
     return scale, {'length_unit': unit, 'length_unit_source': 'Export Units'}

@@ -27,13 +27,10 @@ import zlib
 import numpy as np
 
 from . import tracker_export as te
+from .tracker_export import TrackFormatError
 
 MIN_FRAMES = 50
 _MARKER_RE = re.compile(r'^(m[ab]\w*?)_([xy])(?:_mm)?$')
-
-
-class TrackFormatError(ValueError):
-    """The file does not have the layout this module accepts."""
 
 
 @dataclass
@@ -116,7 +113,7 @@ def read_marker_csv(path: str | Path, frame_rate_hz: float | None = None,
     """The project's CSV (``frame,time_s,mb1_x,...``) or the tracker's CSV export."""
     path = Path(path)
     text = _read_text(path)
-    rows = te.read_export_csv_rows(text)
+    rows = te.read_export_csv_rows(text, path.name)
     if rows and te.looks_like_export(rows[0]):
         return _from_export(rows, path, 'csv', frame_rate_hz, length_unit)
     if frame_rate_hz is not None or length_unit is not None:
@@ -138,9 +135,8 @@ def read_marker_csv(path: str | Path, frame_rate_hz: float | None = None,
     if missing:
         raise TrackFormatError(f'{path.name}: missing column(s) {missing}')
     coord_cols = {h: i for i, h in enumerate(header) if h not in ('frame', 'time_s')}
-    markers = _markers_from_columns(coord_cols, data, path.name)
-    for xy in markers.values():
-        xy[np.all(xy == te.LOST_MARKER, axis=1) | np.any(~np.isfinite(xy), axis=1)] = np.nan
+    markers = {name: te.lost_as_gaps(xy)
+               for name, xy in _markers_from_columns(coord_cols, data, path.name).items()}
     tracks = MarkerTracks(
         time_s=data[:, header.index('time_s')].astype(float),
         frames=_frame_numbers(data[:, header.index('frame')], path.name),
@@ -161,19 +157,13 @@ def read_marker_xlsx(path: str | Path, frame_rate_hz: float | None = None,
                      length_unit: str | None = None) -> MarkerTracks:
     """The tracker's .xlsx export (first worksheet), any of its variants."""
     path = Path(path)
-    try:
-        rows = te.read_export_xlsx_rows(path)
-    except te.ExportFormatError as exc:
-        raise TrackFormatError(str(exc)) from None
-    return _from_export(rows, path, 'xlsx', frame_rate_hz, length_unit)
+    return _from_export(te.read_export_xlsx_rows(path), path, 'xlsx', frame_rate_hz,
+                        length_unit)
 
 
 def _from_export(rows: list, path: Path, fmt: str, frame_rate_hz: float | None,
                  length_unit: str | None) -> MarkerTracks:
-    try:
-        parsed = te.parse_export_rows(rows, path.name, frame_rate_hz, length_unit)
-    except te.ExportFormatError as exc:
-        raise TrackFormatError(str(exc)) from None
+    parsed = te.parse_export_rows(rows, path.name, frame_rate_hz, length_unit)
     meta = parsed['meta']
     tracks = MarkerTracks(
         time_s=parsed['time_s'], frames=_frame_numbers(parsed['frames'], path.name),
