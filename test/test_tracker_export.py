@@ -483,3 +483,63 @@ def test_the_reference_trial_gives_the_same_tracks_from_xlsx_and_csv(real_tracks
     np.testing.assert_array_equal(xlsx.time_s, csv_.time_s)
     for name in csv_.markers_mm:
         np.testing.assert_array_equal(xlsx.markers_mm[name], csv_.markers_mm[name])
+
+
+# ------------------------------------------------------------------ seeded damaged copies
+def _mutations(data: bytes, rng) -> bytes:
+    """One damaged copy: truncated, bytes flipped, a range zeroed, a cell replaced by NaN /
+    Inf / a huge or non-numeric value, rows shuffled, or garbage appended."""
+    b = bytearray(data)
+    kind = rng.randrange(6)
+    if kind == 0:
+        return bytes(b[:rng.randrange(len(b))])
+    if kind == 1:
+        for _ in range(rng.randrange(1, 20)):
+            b[rng.randrange(len(b))] = rng.randrange(256)
+        return bytes(b)
+    if kind == 2:
+        i = rng.randrange(len(b))
+        j = min(len(b), i + rng.randrange(1, 3000))
+        b[i:j] = bytes(j - i)
+        return bytes(b)
+    if kind == 3:
+        cells = data.split(b',')
+        cells[rng.randrange(len(cells))] = rng.choice(
+            [b'nan', b'inf', b'-1e308', b'1e400', b'abc', b'', b'-1'])
+        return b','.join(cells)
+    if kind == 4:
+        rows = data.split(b'\r\n')
+        body = rows[2:]
+        rng.shuffle(body)
+        return b'\r\n'.join(rows[:2] + body)
+    return data + rng.randbytes(rng.randrange(1, 100))
+
+
+@pytest.mark.parametrize('suffix, copies', [('.csv', 200), ('.xlsx', 20)])
+def test_damaged_copies_are_read_or_refused(tmp_path, suffix, copies):
+    """Seeded damaged copies of a real export: each is read into tracks that pass their own
+    checks (finite, strictly increasing times; no (-1, -1) left as a position) or refused
+    with a TrackFormatError; never another exception."""
+    import random
+    if suffix == '.csv':
+        rows = data_file('real_trials/air_23mm_19kfps_pair_track.csv').read_bytes()
+        data = b'\r\n'.join(rows.split(b'\r\n')[:600])
+    else:
+        data = data_file('real_trials/air_23mm_19kfps_pair.xlsx').read_bytes()
+    rng = random.Random(20261125)
+    outcomes = {'read': 0, 'refused': 0}
+    for k in range(copies):
+        path = tmp_path / f'copy{k}{suffix}'
+        path.write_bytes(_mutations(data, rng))
+        try:
+            tracks = load_tracks(path)
+        except TrackFormatError:
+            outcomes['refused'] += 1
+            continue
+        outcomes['read'] += 1
+        tracks.validate()
+        assert np.all(np.isfinite(tracks.time_s)) and np.all(np.diff(tracks.time_s) > 0)
+        for xy in tracks.markers_mm.values():
+            assert not np.any(np.all(xy == -1.0, axis=1))
+            assert not np.any(np.isinf(xy))
+    assert outcomes['read'] > 0 and outcomes['refused'] > 0, outcomes
