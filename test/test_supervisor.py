@@ -306,6 +306,40 @@ def test_timeout_when_the_release_never_comes():
     assert rig.v == 0.0
 
 
+class RefusingStageRig(FakeRig):
+    """A stage that ignores its first ``refusals`` velocity commands, as stage_node refuses a
+    pull until its own force feed has a reading (a WARN on its diagnostics, not a fault)."""
+
+    def __init__(self, refusals, **kwargs):
+        super().__init__(**kwargs)
+        self.refusals, self.velocity_commands = refusals, []
+
+    def move_at(self, v):
+        self.velocity_commands.append(v)
+        if len(self.velocity_commands) <= self.refusals:
+            self.seq.on_device_message('stage_node', 'velocity move refused: no force '
+                                       'reading yet')
+            return
+        super().move_at(v)
+
+
+def test_a_refused_pull_is_sent_again_once_the_stage_can_take_it():
+    rig = RefusingStageRig(refusals=1)
+    _, _, outcome = run_trial(rig)
+    assert outcome['result'] == 'completed', outcome
+    assert rig.velocity_commands == [2.33e-3, 2.33e-3]
+
+
+def test_a_stage_that_never_moves_aborts_the_trial_with_its_reason():
+    rig = RefusingStageRig(refusals=10)
+    _, _, outcome = run_trial(rig)
+    assert outcome['result'] == 'aborted'
+    assert outcome['reason'] == ('the pull: the stage did not start moving after 3 velocity '
+                                 'commands (stage_node reports: velocity move refused: no '
+                                 'force reading yet)')
+    assert len(rig.velocity_commands) == 3 and rig.v == 0.0
+
+
 # --------------------------------------------------------------------------- over ROS
 @pytest.fixture
 def ros():

@@ -32,6 +32,10 @@ AT_REST_M_PER_S = 1e-6
 # motion yet (the supervisor then took a move just sent for one already over).
 SETTLED_S = 0.3
 MOVE_ATTEMPTS = 3
+# A velocity command the stage has not acted on after this long (rig time) is sent again: the
+# stage refuses a pull until its own force feed has a reading, and in a multi-process stack
+# that feed can start after the supervisor's (the refusal is a WARN, not a fault).
+MOVE_START_S = 0.5
 HOMED_WAIT_S = 3.0               # unknown after this long: go on without homing
 QUERY_RETRY_S = 5.0              # an idempotent query unanswered this long is sent again
 STOP_CONFIRM_S = 2.0             # after an abort, wait this long for the stage to report rest
@@ -324,9 +328,13 @@ class TrialSequence:
         self._wait(lambda: self.monitor.latest_n is not None, 'the force stream')
         if self.monitor.latest_n < self.conditions.slack_force_n:
             self.pull_start_position_m = self.stage_position_m
-            self.rig.move_at(self.conditions.slack_speed_mm_s * 1e-3)
-            self._wait(lambda: self.monitor.latest_n >= self.conditions.slack_force_n,
-                       'taking up slack')
+
+            def taut() -> bool:
+                return self.monitor.latest_n >= self.conditions.slack_force_n
+
+            self._start_moving(self.conditions.slack_speed_mm_s * 1e-3, 'taking up slack',
+                               taut)
+            self._wait(taut, 'taking up slack')
             self.rig.stop_stage()
             self._wait(self._at_rest, 'the stage to stop after taking up slack')
 
@@ -345,8 +353,23 @@ class TrialSequence:
         with self._lock:
             self.monitor.arm_release()
             self._set_state('pulling')
-        self.rig.move_at(self.conditions.pull_speed_mm_s * 1e-3)
+        self._start_moving(self.conditions.pull_speed_mm_s * 1e-3, 'the pull',
+                           self._released.is_set)
         self._wait(self._released.is_set, 'release not detected')
+
+    def _start_moving(self, velocity_m_per_s: float, what: str,
+                      done: Callable[[], bool]) -> None:
+        """Command a constant velocity until the stage moves (or ``done()``): a command it has
+        not acted on within MOVE_START_S of rig time is sent again, MOVE_ATTEMPTS in all."""
+        for _ in range(MOVE_ATTEMPTS):
+            self.rig.move_at(velocity_m_per_s)
+            commanded = self.rig.now_s()
+            self._wait(lambda since=commanded: not self._at_rest() or done()
+                       or self.rig.now_s() - since >= MOVE_START_S, what)
+            if not self._at_rest() or done():
+                return
+        self._fail(f'{what}: the stage did not start moving after {MOVE_ATTEMPTS} velocity '
+                   'commands' + self._device_hint('stage_node'))
 
     def _stop_and_record(self) -> None:
         self._set_state('stopping')
