@@ -148,6 +148,21 @@ def release_index(forces, window=20, jump_n=1.0):
     return (jumps[0] + 1) * window
 
 
+def pull(rig, velocity_m_per_s=PULL_M_PER_S, attempts=10, wait_s=1.0):
+    """Command the pull until /stage/joint_state shows the stage moving, as the supervisor
+    does: stage_node refuses a pull (a WARN) until its own force feed has had a reading, which
+    can come after the node is active."""
+    for _ in range(attempts):
+        rig.velocity.publish(Float64(data=velocity_m_per_s))
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline:
+            states = rig.messages('/stage/joint_state')
+            if states and states[-1].velocity[0] > 0.0:
+                return
+            time.sleep(0.01)
+    raise AssertionError(f'the stage never took the pull ({attempts} commands)')
+
+
 @pytest.fixture(scope='module')
 def trial():
     """Pull at 2.33 mm/s through the nodes until the release, trigger the camera, stop."""
@@ -165,7 +180,7 @@ def trial():
             assert rig.transition(name, Transition.TRANSITION_ACTIVATE), name
             assert rig.state(name) == 'active'
         assert rig.call(Trigger, '/camera/arm').success
-        rig.velocity.publish(Float64(data=PULL_M_PER_S))
+        pull(rig)
         blocks = []
 
         def release_seen():
@@ -275,7 +290,7 @@ def test_force_ceiling_stops_the_stage():
         for name in ('stage_node', 'loadcell_node'):
             assert rig.transition(name, Transition.TRANSITION_CONFIGURE), name
             assert rig.transition(name, Transition.TRANSITION_ACTIVATE), name
-        rig.velocity.publish(Float64(data=PULL_M_PER_S))
+        pull(rig)
         errors = rig.wait_for(lambda: [s for s in rig.diagnostics('loadcell_node')
                                        if s.level == DiagnosticStatus.ERROR], 'the ceiling')
         assert 'above the ceiling 13.000 N' in errors[0].message
