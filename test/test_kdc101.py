@@ -453,6 +453,36 @@ def test_port_vanishing_before_a_command(make_emulator, make_stage):
     assert_link_closed(stage, emu)
 
 
+def stall_after_each_write(stage):
+    """pyserial's write timeout as a stalled process meets it: the bytes are handed over,
+    then the timeout has passed."""
+    write = stage._port.write
+
+    def write_then_time_out(data):
+        write(data)
+        raise serial.SerialTimeoutException('Write timeout')
+    stage._port.write = write_then_time_out
+
+
+def test_a_write_timeout_after_the_bytes_left_is_not_a_link_failure(make_emulator, make_stage):
+    emu = make_emulator(position_mm=10.0, homed=True)
+    stage = make_stage(emu.port)
+    stall_after_each_write(stage)
+    stage.move_to(11 * MM, 1 * MM)
+    assert emu.position_mm == pytest.approx(11.0, abs=1e-3)
+
+
+def test_a_write_timeout_with_bytes_stuck_in_the_queue_fails_the_link(make_emulator, make_stage,
+                                                                     monkeypatch):
+    emu = make_emulator(position_mm=10.0, homed=True)
+    stage = make_stage(emu.port)
+    stall_after_each_write(stage)
+    monkeypatch.setattr(type(stage._port), 'out_waiting', property(lambda port: 6))
+    with pytest.raises(DeviceError, match=r'failed while sending .*Write timeout'):
+        stage.move_to(11 * MM, 1 * MM)
+    assert_link_closed(stage, emu)
+
+
 def test_missing_port(make_stage):
     stage = make_stage('/dev/no-such-kdc101', open_=False)
     with pytest.raises(DeviceError, match='cannot open KDC101 port /dev/no-such-kdc101'):

@@ -410,9 +410,22 @@ class Kdc101Stage(Stage):
                                   f'open{cause}')
             try:
                 self._port.write(data)
+            except serial.SerialTimeoutException as exc:
+                if self._bytes_still_queued() == 0:
+                    # pyserial checks its write timeout after the bytes are handed over: a
+                    # process stalled for longer (a long GC pause) is not a stuck line.
+                    return
+                raise DeviceError(f'KDC101 port {self.port_path} failed while sending '
+                                  f'{name}: {exc}') from exc
             except (serial.SerialException, OSError) as exc:
                 raise DeviceError(f'KDC101 port {self.port_path} failed while sending '
                                   f'{name}: {exc}') from exc
+
+    def _bytes_still_queued(self) -> int:
+        try:
+            return self._port.out_waiting
+        except (serial.SerialException, OSError, AttributeError):
+            return -1
 
     def _wait_for(self, accept: Callable, since_seq: int, timeout_s: float, what: str,
                   motion: bool = False, fail_on_timeout: bool = True):
