@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 import sys
 import time
@@ -113,15 +114,27 @@ def _ros_session(run, args) -> int:
         print(f'mantis {args.command}: {exc}', file=sys.stderr)
         return USAGE_ERROR
     import rclpy
+    from rclpy.signals import SignalHandlerOptions
 
+    from .nodes.stopping import StopSignals
     from .ros_env import claim_local_domain
     claim_local_domain()
-    rclpy.init()
+    # our handlers, not rclpy's: its handler shuts the context down before the stage's stop and
+    # the trial's end could be published
+    signals = StopSignals(f'mantis {args.command}').install()
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     try:
-        return run(config, args)
+        status = run(config, args, signals)
     finally:
         if rclpy.ok():
             rclpy.shutdown()
+    if signals.first is not None:
+        # Everything is stopped and closed; the interpreter's own teardown (DDS participants)
+        # takes seconds more, which an interrupted operator should not wait for.
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(status)
+    return status
 
 
 def run_trial(args) -> int:
@@ -132,46 +145,83 @@ def run_bringup(args) -> int:
     return _ros_session(_bringup, args)
 
 
-def _trial(config, args) -> int:
-    from .nodes.bringup import StackError
-
-    try:
-        return _run_stack_trial(config, args)
-    except StackError as exc:
-        print(f'mantis trial: {exc}', file=sys.stderr)
-        return 1
-
-
-def _run_stack_trial(config, args) -> int:
-    from .nodes.bringup import Stack
+def _trial(config, args, signals) -> int:
+    from .nodes.bringup import Stack, StackError
+    from .nodes.stopping import StopRequested
     from .nodes.trial_client import TrialClient
     from .trial_summary import format_summary, summarize
 
     stack = Stack(config, log_dir=args.log_dir)
+    signals.emergency_stop = stack.emergency_stop
     client = TrialClient()
     stack.add_node(client)
-    bag = None
+    run = _TrialRun()
     try:
         stack.start()
-        if not client.wait_for_supervisor(60.0, stack.check_processes):
-            print('mantis trial: the supervisor did not come up within 60 s', file=sys.stderr)
-            return 1
-        started, message, final = client.run_trial(timeout_s=args.timeout)
-        if not started:
-            print(f'mantis trial: the supervisor refused to start: {message}', file=sys.stderr)
-            return 1
-        bag = Path(message.rsplit('logging to ', 1)[-1])
-        print(f'bag: {bag}', flush=True)
-        if final is None:
+        run.follow(client, stack, args.timeout)
+    except StopRequested as stop:
+        run.reason = stop.reason
+    except StackError as exc:
+        run.error = str(exc)
+        if run.started:
             client.call('abort', timeout_s=5.0)
-            print(f'mantis trial: no end of trial within {args.timeout} s; aborted',
-                  file=sys.stderr)
-        _wait_closed(bag, 30.0)
+            client.wait_for_end(10.0)
     finally:
-        stack.stop()
+        signals.shield()
+        if run.bag is None and config.processes == 'single' and stack.nodes:
+            run.bag = _supervisor_bag(stack)
+        stack.stop(reason=run.reason or 'trial ended', signum=_signum(signals))
         client.destroy_node()
-    print(format_summary(summarize(bag), with_path=False))
-    return 0 if final == 'done' else 1
+    if signals.first is not None:
+        where = f'log closed: {run.bag}' if run.bag else 'no trial had started'
+        print(f'mantis trial: {signals.first.reason}: stage stopped; {where}', file=sys.stderr)
+        return signals.first.exit_status
+    if run.error:
+        print(f'mantis trial: {run.error}', file=sys.stderr)
+        return 1
+    print(format_summary(summarize(run.bag), with_path=False))
+    return 0 if run.final == 'done' else 1
+
+
+class _TrialRun:
+    """What `mantis trial` has learnt about its trial so far."""
+
+    def __init__(self):
+        self.started = False
+        self.bag: Path | None = None
+        self.final: str | None = None
+        self.error = ''
+        self.reason = ''
+
+    def follow(self, client, stack, timeout_s: float) -> None:
+        from .nodes.bringup import StackError
+
+        if not client.wait_for_supervisor(60.0, stack.check_processes):
+            raise StackError('the supervisor did not come up within 60 s')
+        self.started, message = client.start_trial()
+        if not self.started:
+            raise StackError(f'the supervisor refused to start: {message}')
+        self.bag = Path(message.rsplit('logging to ', 1)[-1])
+        print(f'bag: {self.bag}', flush=True)
+        self.final = client.wait_for_end(timeout_s, alive=stack.check_processes)
+        if self.final is None:
+            client.call('abort', timeout_s=5.0)
+            raise StackError(f'no end of trial within {timeout_s} s; aborted')
+        if not _wait_closed(self.bag, 30.0):
+            raise StackError(f'the trial ended ({self.final}) but its log {self.bag} was not '
+                             f'closed within 30 s')
+
+
+def _supervisor_bag(stack) -> Path | None:
+    try:
+        return stack.node('supervisor_node').bag_path
+    except StopIteration:
+        return None
+
+
+def _signum(signals) -> int:
+    import signal
+    return signals.first.signum if signals.first is not None else signal.SIGINT
 
 
 def _wait_closed(bag: Path, timeout_s: float) -> bool:
@@ -183,10 +233,13 @@ def _wait_closed(bag: Path, timeout_s: float) -> bool:
     return True
 
 
-def _bringup(config, args) -> int:
+def _bringup(config, args, signals) -> int:
     from .nodes.bringup import Stack
+    from .nodes.stopping import StopRequested
 
     stack = Stack(config, log_dir=args.log_dir)
+    signals.emergency_stop = stack.emergency_stop
+    status = 0
     try:
         stack.start()
         names = ', '.join(config.node_names())
@@ -197,12 +250,20 @@ def _bringup(config, args) -> int:
             dead = stack.dead_processes()
             if dead:
                 print(f'mantis bringup: node process(es) ended: {dead}', file=sys.stderr)
-                return 1
+                status = 1
+                break
             time.sleep(0.5)
-    except KeyboardInterrupt:
-        return 0
+    except StopRequested:
+        pass
     finally:
-        stack.stop()
+        signals.shield()
+        reason = signals.first.reason if signals.first else 'a node process ended'
+        stack.stop(reason=reason, signum=_signum(signals))
+    if signals.first is not None:
+        print(f'mantis bringup: {signals.first.reason}: stage stopped, nodes ended',
+              file=sys.stderr)
+        return signals.first.exit_status
+    return status
 
 
 __all__ = ['add_commands', 'stack_config']

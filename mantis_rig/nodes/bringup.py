@@ -10,8 +10,9 @@
   with add_node() (a client), whose callbacks never block (mantis_rig.nodes.executors).
 * ``processes='multi'``: each node is ``python -m mantis_rig.nodes.<name> --ros-args
   --params-file <stack.yaml>``, with ``use_sim_time`` in sim mode, talking to the world over
-  /sim/*; they inherit this process's environment, hence its ROS domain. stop() interrupts them
-  (SIGINT: the supervisor first, so that it aborts a trial and closes its log; then SIGKILL).
+  /sim/*; they inherit this process's environment, hence its ROS domain, each in a process
+  group of its own. stop() signals them (the supervisor first, so that it aborts a trial and
+  closes its log; SIGKILL for any still running after 2.5 s).
 
 The device nodes come up unconfigured; the supervisor configures and activates them.
 """
@@ -26,13 +27,14 @@ import subprocess
 import sys
 import tempfile
 import threading
+import time
 
 from rclpy.parameter import Parameter
 import yaml
 
 from mantis_rig.hardware.local_world import LocalWorldPort
 
-from .executors import light_executor, threaded_executor
+from .executors import STACK_PARENT_ENV, light_executor, threaded_executor
 
 DEVICE_CLASSES = {'stage_node': 'StageNode', 'loadcell_node': 'LoadcellNode',
                   'camera_node': 'CameraNode'}
@@ -160,9 +162,12 @@ class Stack:
             yaml.safe_dump(params, f)
         self._params_file = Path(path)
         for name in params:
+            # Each node in a process group of its own: a terminal's Ctrl-C reaches only this
+            # process, which stops the nodes in order (stop()); a node whose parent is gone
+            # stops itself (executors.run_node).
             self.processes[name] = subprocess.Popen(
                 self.command(name), stdout=self._log(name), stderr=subprocess.STDOUT,
-                env=os.environ.copy())
+                env={**os.environ, STACK_PARENT_ENV: str(os.getpid())}, process_group=0)
 
     def command(self, name: str) -> list:
         return [sys.executable, '-m', f'mantis_rig.nodes.{name}', '--ros-args',
@@ -194,14 +199,18 @@ class Stack:
                 if p.poll() is not None}
 
     # ------------------------------------------------------------------ stop
-    def stop(self) -> None:
+    def stop(self, reason: str = 'supervisor shutting down',
+             signum: int = signal.SIGINT) -> None:
+        """Abort a trial in progress with `reason` (the stage stops, the reason is logged, the
+        log closed), then end every node and process. In multi-process mode the supervisor
+        process gets `signum` first, then the device processes."""
         for node in self.nodes:
             if node.get_name() == SUPERVISOR_NODE[0]:
-                node.shutdown_trial()
+                node.shutdown_trial(reason)
         supervisor = self.processes.get(SUPERVISOR_NODE[0])
         if supervisor is not None:            # first: it aborts a trial and closes its log
-            _interrupt([supervisor])
-        _interrupt(self.processes.values())
+            _end_processes([supervisor], signum)
+        _end_processes(self.processes.values(), signum)
         for executor in (self.executor, self.device_executor):
             executor.shutdown(timeout_sec=5.0)
         for node in reversed(self.nodes):
@@ -212,6 +221,20 @@ class Stack:
             thread.join(timeout=5.0)
         if self._params_file is not None:
             self._params_file.unlink(missing_ok=True)
+
+    def emergency_stop(self) -> None:
+        """Stop the stage by the quickest route, from a signal handler: the stage node's
+        device in this process, or a SIGTERM to its process (whose handler stops it); every
+        other node process gets SIGTERM too and ends by itself."""
+        for node in self.nodes:
+            if node.get_name() == 'stage_node':
+                node.emergency_stop()
+        stage = self.processes.get('stage_node')
+        ordered = ([stage] if stage is not None else []) + [
+            p for name, p in self.processes.items() if name != 'stage_node']
+        for process in ordered:
+            if process.poll() is None:
+                process.send_signal(signal.SIGTERM)
 
     def __enter__(self):
         return self.start()
@@ -227,14 +250,16 @@ def _spin(executor) -> None:
         pass
 
 
-def _interrupt(processes) -> None:
+def _end_processes(processes, signum: int, grace_s: float = 2.5) -> None:
+    """Send `signum`; a process still running after `grace_s` is killed."""
     processes = list(processes)
     for process in processes:
         if process.poll() is None:
-            process.send_signal(signal.SIGINT)
+            process.send_signal(signum)
+    deadline = time.monotonic() + grace_s
     for process in processes:
         try:
-            process.wait(timeout=10.0)
+            process.wait(timeout=max(0.0, deadline - time.monotonic()))
         except subprocess.TimeoutExpired:
             process.kill()
             process.wait()

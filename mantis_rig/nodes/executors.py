@@ -11,7 +11,7 @@ deadlocks against its spin(): the supervisor publishes from its trial thread.)
 """
 from __future__ import annotations
 
-import signal
+import os
 import sys
 import threading
 
@@ -21,6 +21,8 @@ from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, Si
 from rclpy.signals import SignalHandlerOptions
 
 from mantis_rig.ros_env import claim_local_domain
+
+from .stopping import StopRequested, StopSignals, watch_parent
 
 USAGE_ERROR = 2
 NODE_THREADS = 4        # a device node process: its blocking services and backend waits
@@ -63,24 +65,27 @@ class SideNode:
         self.node.destroy_node()
 
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt
+STACK_PARENT_ENV = 'MANTIS_STACK_PARENT'    # set by a stack for its node processes
 
 
 def run_node(node_class, args=None, make_executor=None) -> int:
     """main() of a node process: local DDS, init, spin, clean up; the exit status.
 
     `make_executor`: a factory called after init; default a MultiThreadedExecutor (the device
-    nodes' services block). A node
-    whose parameters are refused at construction exits 2 with the reason. SIGINT and SIGTERM
-    end the spin here rather than in rclpy's handler, which would shut the context down first:
-    the node still stops its device (a simulated stage's stop is a message) and the supervisor
-    closes its log before the context goes."""
+    nodes' services block). A node whose parameters are refused at construction exits 2 with
+    the reason. SIGINT and SIGTERM end the spin here rather than in rclpy's handler, which would
+    shut the context down first: the node still stops its device (a node's `emergency_stop`)
+    and the supervisor aborts its trial and closes its log (`shutdown_trial`) before the
+    context goes; the exit status is then 130 or 143. A node process of a stack also stops when
+    the stack's process is gone."""
     claim_local_domain()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    signal.signal(signal.SIGINT, _interrupt)
-    signal.signal(signal.SIGTERM, _interrupt)
     node = None
+    signals = StopSignals(node_class.__name__,
+                          emergency_stop=lambda: _call(node, 'emergency_stop')).install()
+    if os.environ.get(STACK_PARENT_ENV, '').isdigit():
+        watch_parent(int(os.environ[STACK_PARENT_ENV]))
+    status = 0
     try:
         try:
             node = node_class()
@@ -90,10 +95,25 @@ def run_node(node_class, args=None, make_executor=None) -> int:
         executor = make_executor() if make_executor else threaded_executor(NODE_THREADS)
         executor.add_node(node)
         executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
+    except StopRequested as stop:
+        status = stop.exit_status
+        _call(node, 'emergency_stop')
+        _call(node, 'shutdown_trial', stop.reason)
+    except ExternalShutdownException:
         pass
     finally:
+        signals.shield()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    return status
+
+
+def _call(node, method: str, *args) -> None:
+    function = getattr(node, method, None)
+    if function is None:
+        return
+    try:
+        function(*args)
+    except Exception as exc:       # noqa: BLE001 - the rest of the shutdown must go on
+        print(f'{node.get_name()}: {method}: {exc}', file=sys.stderr, flush=True)

@@ -130,6 +130,13 @@ class StageNode(DeviceNode):
         super().destroy_node()
         self._force_feed.close()
 
+    def emergency_stop(self) -> None:
+        """Stop the stage now, from any thread, without waiting for a move in progress (a
+        process being interrupted)."""
+        stage = self.device
+        if stage is not None:
+            stage.stop()
+
     # --- the force guard --------------------------------------------------------------------
     def _guard_clock(self):
         if not self.sim():

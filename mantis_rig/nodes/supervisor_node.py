@@ -277,6 +277,7 @@ class SupervisorNode(Node):
         if sequence is None:
             return
         if sequence.running:
+            self.get_logger().info(f'aborting trial {self.trials}: {reason}')
             sequence.abort(reason)
         sequence.finished.wait(5.0)
 

@@ -16,6 +16,7 @@ class TrialClient(Node):
     def __init__(self, node_name: str = 'mantis_trial_client', **kwargs):
         super().__init__(node_name, **kwargs)
         self.states: list[str] = []
+        self.trial_start = 0
         self._changed = threading.Condition()
         self._start = self.create_client(Trigger, '/supervisor/start_trial')
         self._abort = self.create_client(Trigger, '/supervisor/abort')
@@ -58,14 +59,34 @@ class TrialClient(Node):
                     return found
                 self._changed.wait(remaining)
 
+    def start_trial(self) -> tuple[bool, str]:
+        """Ask the supervisor to start a trial; (started, its message). `trial_start` is then
+        the index in self.states from which wait_for_end() looks."""
+        self.trial_start = len(self.states)
+        ok, message = self.call('start_trial')
+        if ok:
+            self.wait_for_state(('configuring',), self.trial_start, timeout_s=10.0)
+            with self._changed:
+                self.trial_start = next((i for i in range(self.trial_start, len(self.states))
+                                         if self.states[i] == 'configuring'), self.trial_start)
+        return ok, message
+
+    def wait_for_end(self, timeout_s: float = 300.0, alive=lambda: None,
+                     check_every_s: float = 0.5) -> str | None:
+        """'done' or 'aborted' once the trial started by start_trial() ends, None on timeout;
+        ``alive()`` is called between checks and may raise to stop waiting."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            remaining = deadline - time.monotonic()
+            final = self.wait_for_state(('done', 'aborted'), self.trial_start,
+                                        timeout_s=min(check_every_s, max(remaining, 0.0)))
+            if final is not None or remaining <= 0:
+                return final
+            alive()
+
     def run_trial(self, timeout_s: float = 300.0) -> tuple[bool, str, str | None]:
         """Start a trial and wait for its end: (started, start message, final state)."""
-        mark = len(self.states)
-        ok, message = self.call('start_trial')
+        ok, message = self.start_trial()
         if not ok:
             return False, message, None
-        self.wait_for_state(('configuring',), mark, timeout_s=10.0)
-        with self._changed:
-            begun = next((i for i in range(mark, len(self.states))
-                          if self.states[i] == 'configuring'), mark)
-        return True, message, self.wait_for_state(('done', 'aborted'), begun, timeout_s)
+        return True, message, self.wait_for_end(timeout_s)

@@ -1,0 +1,103 @@
+"""SIGINT and SIGTERM for the rig's processes: the first asks for an orderly stop (stage
+stopped, reason logged, log closed, processes ended), a second one during that stop stops the
+stage and exits at once.
+
+rclpy's own handler is not used (``rclpy.init(signal_handler_options=NO)``): it shuts the
+context down first, after which nothing can publish the stage's stop or the trial's end.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+import os
+import signal
+import sys
+import threading
+from typing import Optional
+
+SIGNAL_NAMES = {signal.SIGINT: 'SIGINT (Ctrl-C)', signal.SIGTERM: 'SIGTERM'}
+PARENT_CHECK_S = 0.5
+
+
+class StopRequested(BaseException):
+    """Raised in the main thread by the first SIGINT or SIGTERM. A BaseException, like
+    KeyboardInterrupt, so that no `except Exception` on the way swallows it."""
+
+    def __init__(self, signum: int):
+        self.signum = signum
+        super().__init__(self.reason)
+
+    @property
+    def name(self) -> str:
+        return SIGNAL_NAMES.get(self.signum, signal.Signals(self.signum).name)
+
+    @property
+    def reason(self) -> str:
+        return f'interrupted by {self.name}'
+
+    @property
+    def exit_status(self) -> int:
+        """The shell's convention: 128 + the signal number (130 SIGINT, 143 SIGTERM)."""
+        return 128 + self.signum
+
+
+class StopSignals:
+    """Install with `install()` in the main thread. `emergency_stop` is what a second signal
+    does before the process exits: stop the stage, by the quickest route there is."""
+
+    def __init__(self, program: str, emergency_stop: Optional[Callable[[], None]] = None):
+        self.program = program
+        self.emergency_stop = emergency_stop
+        self.first: Optional[StopRequested] = None
+        self._shielded = False
+        self._lock = threading.Lock()
+
+    def install(self) -> StopSignals:
+        for signum in SIGNAL_NAMES:
+            signal.signal(signum, self._on_signal)
+        return self
+
+    @property
+    def stopping(self) -> bool:
+        return self.first is not None
+
+    def shield(self) -> None:
+        """The orderly stop is under way: from now on a first signal is only noted (see
+        `first`), not raised into it; a second one still exits at once."""
+        self._shielded = True
+
+    def _on_signal(self, signum, frame) -> None:
+        with self._lock:
+            first, self.first = self.first, self.first or StopRequested(signum)
+        if first is None:
+            if self._shielded:
+                return
+            raise self.first
+        self._exit_now(signum)
+
+    def _exit_now(self, signum: int) -> None:
+        stopped = 'stage stopped'
+        try:
+            if self.emergency_stop is not None:
+                self.emergency_stop()
+        except Exception as exc:       # noqa: BLE001 - exiting at once is what was asked
+            stopped = f'stopping the stage failed: {exc}'
+        name = SIGNAL_NAMES.get(signum, str(signum))
+        print(f'{self.program}: second {name} during shutdown: {stopped}; exiting now',
+              file=sys.stderr, flush=True)
+        os._exit(128 + signum)
+
+
+def watch_parent(parent_pid: int) -> threading.Thread:
+    """SIGTERM this process when its parent is gone (a node process of a stack whose parent was
+    killed outright must not go on driving a device)."""
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            threading.Event().wait(PARENT_CHECK_S)
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    thread = threading.Thread(target=watch, name='parent-watch', daemon=True)
+    thread.start()
+    return thread
+
+
+__all__ = ['StopRequested', 'StopSignals', 'watch_parent']

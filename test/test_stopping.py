@@ -1,0 +1,205 @@
+"""Stopping a trial from outside (issue 11): SIGINT or SIGTERM to `mantis trial`, to its
+process group as a terminal sends it or to the process alone, in either layout; a second
+Ctrl-C during the shutdown; a node process killed by its own signal.
+
+Each checks the bag (the reason recorded, metadata.yaml written, the stage's last commanded
+velocity 0 and the stage standing within 0.1 s of rig time after it), the exit status
+(128 + the signal), one line on stderr and no traceback, and that no process is left. The exit
+is required within 3 s; the bound here is 8 s so that a busy machine does not fail the test
+(the figure itself is printed by bench/bench_trial.py --stop).
+"""
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+
+from mantis_rig.recording import BagReader
+
+REPO = Path(__file__).resolve().parents[1]
+EXIT_BOUND_S = 8.0
+INTO_TRIAL_S = 3.0          # wall seconds after the bag is opened: homing, slack or pulling
+STAGE_STOPS_WITHIN_S = 0.1  # rig time
+
+pytestmark = pytest.mark.timeout(300)
+
+
+class TrialProcess:
+    """`mantis trial` in a session of its own, its output collected as it comes."""
+
+    def __init__(self, tmp_path, processes='single', extra=()):
+        self.process = subprocess.Popen(
+            [sys.executable, '-m', 'mantis_rig.cli', 'trial', '--backend', 'sim',
+             '--scene', 'air_23mm', '--out', str(tmp_path), '--processes', processes,
+             '--log-dir', str(tmp_path / 'logs'), *extra],
+            cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            start_new_session=True)
+        self.stdout, self.stderr = [], []
+        self._bag_seen = threading.Event()
+        self._readers = [threading.Thread(target=self._read, args=(stream, lines), daemon=True)
+                         for stream, lines in ((self.process.stdout, self.stdout),
+                                               (self.process.stderr, self.stderr))]
+        for reader in self._readers:
+            reader.start()
+
+    def _read(self, stream, lines) -> None:
+        for line in stream:
+            lines.append(line.rstrip('\n'))
+            if line.startswith('bag: '):
+                self._bag_seen.set()
+
+    @property
+    def bag(self) -> Path:
+        line = next(line for line in self.stdout if line.startswith('bag: '))
+        return Path(line.removeprefix('bag: '))
+
+    def wait_into_trial(self) -> None:
+        assert self._bag_seen.wait(90.0), 'no trial started:\n' + '\n'.join(self.stderr)
+        time.sleep(INTO_TRIAL_S)
+        assert self.process.poll() is None, 'the trial ended before it was interrupted'
+
+    def wait_for_stderr(self, text: str, timeout_s: float = 30.0) -> None:
+        deadline = time.monotonic() + timeout_s
+        while not any(text in line for line in self.stderr):
+            assert time.monotonic() < deadline, f'no {text!r} on stderr'
+            time.sleep(0.005)
+
+    def children(self) -> list:
+        return [int(p.name) for p in Path('/proc').iterdir() if p.name.isdigit()
+                and _parent_of(int(p.name)) == self.process.pid]
+
+    def signal(self, signum, group=True) -> float:
+        if group:
+            os.killpg(self.process.pid, signum)
+        else:
+            self.process.send_signal(signum)
+        return time.monotonic()
+
+    def wait(self, timeout_s=60.0) -> int:
+        status = self.process.wait(timeout=timeout_s)
+        for reader in self._readers:
+            reader.join(timeout=5.0)
+        return status
+
+    def kill(self) -> None:
+        if self.process.poll() is None:
+            os.killpg(self.process.pid, signal.SIGKILL)
+            self.process.wait()
+
+
+def _parent_of(pid: int):
+    try:
+        return int(Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[1])
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def running(pid: int) -> bool:
+    try:
+        state = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != 'Z'
+
+
+@pytest.fixture
+def trial(tmp_path):
+    started = []
+
+    def start(*args, **kwargs):
+        started.append(TrialProcess(tmp_path, *args, **kwargs))
+        return started[-1]
+    yield start
+    for process in started:
+        process.kill()
+
+
+def check_stopped_bag(bag: Path, reason: str) -> None:
+    assert (bag / 'metadata.yaml').exists(), 'the bag was not closed'
+    reader = BagReader(bag)
+    assert reader.complete
+    outcome = reader.metadata('trial_outcome')
+    assert outcome['result'] == 'aborted'
+    assert outcome['reason'] == reason
+    commands = list(reader.messages(['/stage/velocity_command']))
+    assert commands and commands[-1].message.data == 0.0
+    stop_s = commands[-1].log_time_ns * 1e-9
+    late = [m.message.velocity[0] for m in reader.messages(['/stage/joint_state'])
+            if m.log_time_ns * 1e-9 > stop_s + STAGE_STOPS_WITHIN_S]
+    assert all(v == 0.0 for v in late), f'the stage still moved after the stop: {late[:5]}'
+    states = [m.message.data for m in reader.messages(['/supervisor/state'])]
+    assert states[-1] == 'aborted'
+
+
+def check_exit(trial, status, sent_at, signum) -> None:
+    waited = time.monotonic() - sent_at
+    stderr = '\n'.join(trial.stderr)
+    assert status == 128 + signum, stderr
+    assert waited < EXIT_BOUND_S, f'exit took {waited:.1f} s'
+    assert 'Traceback' not in stderr, stderr
+    ours = [line for line in trial.stderr if line.startswith('mantis trial: ')]
+    assert len(ours) == 1, stderr
+    name = 'SIGINT (Ctrl-C)' if signum == signal.SIGINT else 'SIGTERM'
+    assert ours[0] == f'mantis trial: interrupted by {name}: stage stopped; log closed: ' \
+                      f'{trial.bag}'
+
+
+@pytest.mark.parametrize('processes, signum, group', [
+    ('single', signal.SIGINT, True),
+    ('single', signal.SIGTERM, False),
+    ('multi', signal.SIGINT, True),
+    ('multi', signal.SIGTERM, False),
+], ids=['single-SIGINT-group', 'single-SIGTERM-process', 'multi-SIGINT-group',
+        'multi-SIGTERM-process'])
+def test_a_signal_stops_the_stage_closes_the_log_and_ends_everything(trial, processes,
+                                                                     signum, group):
+    run = trial(processes)
+    run.wait_into_trial()
+    children = run.children()
+    assert len(children) == (5 if processes == 'multi' else 0)
+    sent_at = run.signal(signum, group=group)
+    status = run.wait()
+    check_exit(run, status, sent_at, signum)
+    name = 'SIGINT (Ctrl-C)' if signum == signal.SIGINT else 'SIGTERM'
+    check_stopped_bag(run.bag, f'interrupted by {name}')
+    time.sleep(0.5)
+    assert [pid for pid in children if running(pid)] == []
+
+
+def test_a_second_ctrl_c_stops_the_stage_and_exits_at_once(trial):
+    run = trial('single')
+    run.wait_into_trial()
+    run.signal(signal.SIGINT)
+    run.wait_for_stderr('[supervisor_node]: aborting trial 1: interrupted by SIGINT')
+    sent_at = run.signal(signal.SIGINT)      # inside the orderly stop
+    status = run.wait()
+    assert status == 130
+    assert time.monotonic() - sent_at < EXIT_BOUND_S
+    stderr = '\n'.join(run.stderr)
+    assert 'Traceback' not in stderr, stderr
+    assert 'mantis trial: second SIGINT (Ctrl-C) during shutdown: stage stopped; exiting now' \
+        in run.stderr, stderr
+
+
+def test_a_node_process_killed_by_its_own_signal_aborts_the_trial(trial):
+    run = trial('multi')
+    run.wait_into_trial()
+    children = run.children()
+    stage = next(pid for pid in children
+                 if 'mantis_rig.nodes.stage_node' in Path(f'/proc/{pid}/cmdline').read_text())
+    os.kill(stage, signal.SIGTERM)
+    status = run.wait(timeout_s=60.0)
+    stderr = '\n'.join(run.stderr)
+    assert status == 1, stderr
+    assert 'Traceback' not in stderr, stderr
+    ours = [line for line in run.stderr if line.startswith('mantis trial: ')]
+    assert len(ours) == 1 and 'stage_node (exit 143)' in ours[0], stderr
+    reader = BagReader(run.bag)
+    assert reader.complete
+    assert reader.metadata('trial_outcome')['result'] == 'aborted'
+    time.sleep(0.5)
+    assert [pid for pid in children if running(pid)] == []
