@@ -457,18 +457,25 @@ def test_hardware_stage_node_on_the_kdc101_emulator(rig):
         rig.velocity.publish(Float64(data=2e-3))
         rig.wait_for(lambda: rig.messages('/stage/joint_state')[-1].position[0] > 0.2e-3,
                      'the stage to move', 30.0)
-        # a block over the ceiling (30 N) stops it, in the driver layer: a fault
+        # a block over the ceiling (30 N) stops it, in the driver layer: an ERROR, latched; the
+        # stage stays open and active, and refuses to pull until it is activated again
         feeding.set()
         feeder.join()
         forces.publish(force_block_to_msg(time.time_ns(), 50_000, np.full(200, 31.0)))
         tripped = rig.wait_for(lambda: [s for s in rig.diagnostics('stage_node')
                                         if 'above the ceiling' in s.message], 'the trip', 30.0)
         assert tripped[-1].level == DiagnosticStatus.ERROR
-        rig.wait_for(lambda: rig.state('stage_node') == 'unconfigured', 'the fault', 30.0)
+        rig.wait_for(lambda: not emulator.moving, 'the stage to stop', 30.0)
+        assert rig.state('stage_node') == 'active'
+        forces.publish(force_block_to_msg(time.time_ns(), 50_000, np.full(200, 5.0)))
+        rig.velocity.publish(Float64(data=2e-3))
+        rig.wait_for(lambda: [s for s in rig.diagnostics('stage_node')
+                              if s.level == DiagnosticStatus.WARN and 'refused' in s.message
+                              and 'ceiling' in s.message], 'the latched guard to refuse', 30.0)
         assert not emulator.moving
-        assert rig.transition('stage_node', Transition.TRANSITION_CONFIGURE)   # a new guard
-        assert rig.transition('stage_node', Transition.TRANSITION_ACTIVATE)
-        released_before = len(device_released(rig, 'stage_node'))       # by the trip's fault
+        assert rig.transition('stage_node', Transition.TRANSITION_DEACTIVATE)
+        assert rig.transition('stage_node', Transition.TRANSITION_ACTIVATE)     # trip cleared
+        released_before = len(device_released(rig, 'stage_node'))
         emulator.vanish()                                        # the USB cable is pulled
         rig.wait_for(lambda: len(device_released(rig, 'stage_node')) > released_before, 'on_error',
                      30.0)

@@ -71,6 +71,7 @@ class FakeRig:
         self.calls, self.states, self.stops = [], [], 0
         self.homed = homed
         self.camera = None
+        self.parameters = {}
         self.trigger_t = None
         self.markers_sent = False
         self._run = threading.Event()
@@ -103,6 +104,11 @@ class FakeRig:
 
     def set_camera(self, frame_rate_hz, pre_trigger_s, post_trigger_s):
         self.camera = (frame_rate_hz, pre_trigger_s, post_trigger_s)
+        return Pending((True, ''), done=True)
+
+    def set_parameters(self, node, values):
+        # what each node was given, and in which lifecycle state
+        self.parameters.setdefault(node, []).append((dict(values), self.lifecycle[node]))
         return Pending((True, ''), done=True)
 
     def move_at(self, v):
@@ -211,6 +217,18 @@ def test_force_ceiling_aborts_and_stops_the_stage():
     assert outcome['reason'].startswith('force ceiling: ')
     assert rig.states[-1] == 'aborted' and 'returning' not in rig.states
     assert rig.v == 0.0 and rig.stops >= 1
+
+
+def test_the_trials_force_ceiling_is_set_on_every_guard_before_it_is_configured():
+    rig, _, outcome = run_trial(force_ceiling_n=12.5)
+    assert outcome['result'] == 'aborted'
+    assert rig.parameters == {'stage_node': [({'force_ceiling_n': 12.5}, 'unconfigured')],
+                              'loadcell_node': [({'force_ceiling_n': 12.5}, 'unconfigured')]}
+
+
+def test_without_the_supervisors_monitor_the_ceiling_is_left_to_the_guards():
+    _, _, outcome = run_trial(force_ceiling_n=15.0, supervisor_force_monitor=False)
+    assert outcome['result'] == 'completed', outcome      # the fake rig has no guards
 
 
 def test_travel_limit_aborts():

@@ -13,6 +13,7 @@ MANTIS_TEST_RTF (default 1); when the machine cannot keep up, simulated time sli
 """
 import os
 from pathlib import Path
+import re
 import subprocess
 import sys
 import threading
@@ -243,7 +244,9 @@ def test_force_ceiling_below_the_peak_aborts(ros, tmp_path):
     assert reader.complete
     outcome = reader.metadata('trial_outcome')
     assert outcome['result'] == 'aborted'
-    assert outcome['reason'].startswith('force ceiling: ') and '> 13.0 N' in outcome['reason']
+    # the supervisor's monitor, or one of the guards given the same ceiling, whichever is first
+    assert re.search(r'(> 13\.0 N|above the ceiling 13(\.000)? N)', outcome['reason']), \
+        outcome['reason']
     assert outcome['stage_stopped'] == 'true'
     commands = [m.message.data for m in reader.messages(['/stage/velocity_command'])]
     assert commands[-1] == 0.0
@@ -281,3 +284,33 @@ def test_supervisor_killed_mid_trial_leaves_a_readable_bag(ros, tmp_path):
     assert recovered.complete
     assert recovered.message_count >= len(blocks) + len(states)
     check_rosbags_decodes_everything(report.output)
+
+
+def test_one_force_ceiling_reaches_the_stages_own_guard(tmp_path):
+    """`--set force_ceiling_n=12` with the supervisor's own monitor off: the stage driver's
+    guard, given the same ceiling by the stack and the supervisor (not its default 30 N),
+    stops the stage at the first force block above 12 N. In this scene the tendon force falls
+    from 11.3 N during the pull, so that block is the release's force spike (peak 17.9 N, which
+    the guard's default 30 N would let pass)."""
+    result = run_cli('trial', '--backend', 'sim', '--scene', SCENE, '--out', str(tmp_path),
+                     '--real-time-factor', str(RTF), '--set', 'force_ceiling_n=12',
+                     '--set', 'supervisor_force_monitor=false')
+    assert result.returncode == 1, result.stdout + result.stderr
+    bag = Path(result.stdout.splitlines()[0].removeprefix('bag: '))
+    reader = BagReader(bag)
+    outcome = reader.metadata('trial_outcome')
+    assert outcome['result'] == 'aborted'
+    assert reader.metadata('trial_conditions')['supervisor_force_monitor'] == 'False'
+    assert 'above the ceiling 12' in outcome['reason'], outcome['reason']
+    assert not outcome['reason'].startswith('force ceiling')    # not the supervisor's monitor
+    guard = [status.message for m in reader.messages(['/diagnostics'])
+             for status in m.message.status
+             if 'stage_node' in status.name and 'force guard' in status.message]
+    assert guard, outcome['reason']
+    match = re.match(r'force guard: force ([\d.]+) N above the ceiling 12 N; stage stopped',
+                     guard[0])
+    assert match, guard[0]
+    assert 12.0 < float(match[1]) < 30.0
+    assert outcome['stage_stopped'] == 'true'
+    commands = [m.message.data for m in reader.messages(['/stage/velocity_command'])]
+    assert commands[-1] == 0.0

@@ -266,6 +266,15 @@ class CameraTrigger(Device):
 ForceReading = Union[float, np.ndarray, ForceBlock]
 
 
+def _check_force_ceiling(force_ceiling_n) -> None:
+    if isinstance(force_ceiling_n, bool) or not (
+            isinstance(force_ceiling_n, (int, float))
+            and 0.0 < force_ceiling_n <= LOADCELL_CAPACITY_N):
+        raise ConfigurationError(
+            f'force ceiling {force_ceiling_n!r} N must be > 0 N and at most the load cell '
+            f'capacity {LOADCELL_CAPACITY_N:g} N')
+
+
 class StageGuard(Stage):
     """A Stage that stops the wrapped stage when the tendon force passes a ceiling.
 
@@ -290,11 +299,7 @@ class StageGuard(Stage):
                  max_force_age_s: Optional[float] = 0.5,
                  clock_s: Callable[[], float] = time.monotonic,
                  watchdog_period_s: float = 0.02):
-        if not (isinstance(force_ceiling_n, (int, float)) and 0.0 < force_ceiling_n
-                <= LOADCELL_CAPACITY_N):
-            raise ConfigurationError(
-                f'force ceiling {force_ceiling_n!r} N must be > 0 N and at most the load cell '
-                f'capacity {LOADCELL_CAPACITY_N:g} N')
+        _check_force_ceiling(force_ceiling_n)
         if pull_direction not in (1, -1):
             raise ConfigurationError(f'pull direction {pull_direction!r} must be +1 or -1')
         if max_force_age_s is not None and not (max_force_age_s > 0
@@ -353,6 +358,12 @@ class StageGuard(Stage):
         self.stage.close()
 
     # --- the force path -----------------------------------------------------------------------
+
+    def set_force_ceiling(self, force_ceiling_n: float) -> None:
+        """A new ceiling, in force from the next reading on."""
+        _check_force_ceiling(force_ceiling_n)
+        with self._lock:
+            self.force_ceiling_n = float(force_ceiling_n)
 
     def observe_force(self, force: ForceReading) -> Optional[SafetyLimitError]:
         """Take force readings (N): a number, an array of samples or a ForceBlock. Returns the

@@ -33,6 +33,7 @@ from rclpy.parameter import Parameter
 import yaml
 
 from mantis_rig.hardware.local_world import LocalWorldPort
+from mantis_rig.safety_limits import FORCE_CEILING_NAME, FORCE_GUARD_NODES
 
 from .executors import STACK_PARENT_ENV, light_executor, threaded_executor
 
@@ -68,9 +69,14 @@ class StackConfig:
             params[WORLD_NODE[0]] = {'scene': self.scene, 'seed': self.seed,
                                      'set': list(overrides),
                                      'real_time_factor': float(self.real_time_factor)}
+        # one force ceiling for every guard (mantis_rig.safety_limits)
+        ceiling = {FORCE_CEILING_NAME: float(self.supervisor[FORCE_CEILING_NAME])} \
+            if FORCE_CEILING_NAME in self.supervisor else {}
         for name in DEVICE_CLASSES:
             params[name] = {'backend': self.backend, 'scene': self.scene, 'seed': self.seed,
                             'set': list(overrides), **self.devices.get(name, {})}
+            if name in FORCE_GUARD_NODES:
+                params[name].update(ceiling)
             if self.sim:
                 params[name]['use_sim_time'] = True
         params[SUPERVISOR_NODE[0]] = {'backend': self.backend, 'scene': self.scene,

@@ -25,8 +25,12 @@ from mantis_rig.hardware.nidaq import parse_ai_channel
 from mantis_rig.nodes.device_node import ERROR, WARN, DeviceNode, Param, time_msg
 from mantis_rig.nodes.executors import run_node
 from mantis_rig.recording.force_block import force_block_to_msg
-
-LOADCELL_CAPACITY_N = 111.0
+from mantis_rig.safety_limits import (
+    FORCE_CEILING_DEFAULT_N,
+    FORCE_CEILING_DESCRIPTION,
+    FORCE_CEILING_NAME,
+    FORCE_CEILING_RANGE_N,
+)
 
 
 def _check_channel(name: str) -> None:
@@ -42,8 +46,8 @@ class LoadcellNode(DeviceNode):
         Param('block_size', 200, 'samples per /loadcell/force_block message', (1, 1_000_000)),
         Param('newtons_per_volt', 11.12, 'amplifier scale, N/V (IAA100: 10 V at 111 N)',
               (1e-6, 1e6)),
-        Param('force_ceiling_n', 30.0, 'stop the stage above this force, N',
-              (0.0, LOADCELL_CAPACITY_N), at_configure=False),
+        Param(FORCE_CEILING_NAME, FORCE_CEILING_DEFAULT_N, 'the load cell\'s monitor: '
+              + FORCE_CEILING_DESCRIPTION, FORCE_CEILING_RANGE_N, at_configure=False),
         Param('wrench_rate_hz', 200.0, '/loadcell/wrench rate, Hz', (0.1, 10_000.0),
               at_configure=False),
     )

@@ -34,8 +34,8 @@ class RigClient:
                            for n in DEVICE_NODES}
         self._change_state = {n: node.create_client(ChangeState, f'/{n}/change_state', **group)
                               for n in DEVICE_NODES}
-        self._camera_parameters = node.create_client(
-            SetParameters, '/camera_node/set_parameters', **group)
+        self._set_parameters = {n: node.create_client(SetParameters, f'/{n}/set_parameters',
+                                                      **group) for n in DEVICE_NODES}
         self._velocity = node.create_publisher(Float64, '/stage/velocity_command', RELIABLE)
         self._position = node.create_publisher(Float64, '/stage/position_command', RELIABLE)
 
@@ -61,18 +61,22 @@ class RigClient:
                              lambda r: (r.success, r.message), wait)
 
     def set_camera(self, frame_rate_hz, pre_trigger_s, post_trigger_s) -> Pending:
+        return self.set_parameters('camera_node', {'frame_rate_hz': frame_rate_hz,
+                                                   'pre_trigger_s': pre_trigger_s,
+                                                   'post_trigger_s': post_trigger_s})
+
+    def set_parameters(self, node_name: str, values: dict) -> Pending:
+        """Set float parameters of a device node; (all set, the refusals' reasons)."""
         request = SetParameters.Request()
-        for name, value in (('frame_rate_hz', frame_rate_hz), ('pre_trigger_s', pre_trigger_s),
-                            ('post_trigger_s', post_trigger_s)):
+        for name, value in values.items():
             request.parameters.append(ParameterMsg(name=name, value=ParameterValue(
                 type=ParameterType.PARAMETER_DOUBLE, double_value=float(value))))
 
         def answer(response):
-            refused = [f'{p.name}: {r.reason}' for p, r in zip(request.parameters,
-                                                               response.results)
-                       if not r.successful]
+            refused = [f'{node_name} {p.name}: {r.reason}'
+                       for p, r in zip(request.parameters, response.results) if not r.successful]
             return (not refused, '; '.join(refused))
-        return self._request(self._camera_parameters, request, answer)
+        return self._request(self._set_parameters[node_name], request, answer)
 
     def move_at(self, velocity_m_per_s: float) -> None:
         self._velocity.publish(Float64(data=float(velocity_m_per_s)))

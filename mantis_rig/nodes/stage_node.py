@@ -27,15 +27,20 @@ from std_srvs.srv import Trigger
 from mantis_rig.hardware import backends
 from mantis_rig.hardware.apt_units import Z8_COUNTS_PER_MM
 from mantis_rig.hardware.interfaces import (
-    LOADCELL_CAPACITY_N,
     ConfigurationError,
     DeviceError,
     SafetyLimitError,
     StageLimits,
 )
-from mantis_rig.nodes.device_node import OK, WARN, DeviceNode, Param
+from mantis_rig.nodes.device_node import ERROR, OK, WARN, DeviceNode, Param
 from mantis_rig.nodes.executors import SideNode, run_node
 from mantis_rig.recording.force_block import force_block_from_msg
+from mantis_rig.safety_limits import (
+    FORCE_CEILING_DEFAULT_N,
+    FORCE_CEILING_DESCRIPTION,
+    FORCE_CEILING_NAME,
+    FORCE_CEILING_RANGE_N,
+)
 
 HOME_TIMEOUT_S = 120.0
 MOVE_TIMEOUT_S = 120.0
@@ -51,8 +56,8 @@ class StageNode(DeviceNode):
               (1e-6, StageLimits().max_speed_m_per_s), at_configure=False),
         Param('joint_state_rate_hz', 100.0, '/stage/joint_state rate, Hz (read at activate)',
               (1.0, 1000.0), at_configure=False),
-        Param('force_ceiling_n', 30.0, 'driver-level force ceiling: the stage stops and refuses '
-              'to pull above this tendon force, N', (0.5, LOADCELL_CAPACITY_N)),
+        Param(FORCE_CEILING_NAME, FORCE_CEILING_DEFAULT_N, 'the stage driver\'s guard: '
+              + FORCE_CEILING_DESCRIPTION, FORCE_CEILING_RANGE_N, at_configure=False),
         Param('max_force_age_s', 0.5, 'a pull needs a force reading at most this old, s; a '
               'pull whose readings stop is stopped', (0.05, 10.0)),
     )
@@ -74,6 +79,8 @@ class StageNode(DeviceNode):
         self._last_state = None
         self._refused: str | None = None
         self._stopping = False          # a move ending now was stopped on purpose
+        self._reported_trip: str | None = None
+        self.add_post_set_parameters_callback(self._on_parameters_set)
         self._force_feed = SideNode(self, 'force_guard')
         self._force_feed.node.create_subscription(Float64MultiArray, '/loadcell/force_block',
                                                   self._on_force_block, 100)
@@ -98,6 +105,7 @@ class StageNode(DeviceNode):
     def start_streaming(self) -> None:
         self.device.clear_force_trip()      # refused while the force is still over the ceiling
         self._refused = None
+        self._reported_trip = None
         self._publish_state()
         self._timer = self.create_timer(1.0 / self.param('joint_state_rate_hz'),
                                         self._publish_state)
@@ -138,6 +146,12 @@ class StageNode(DeviceNode):
             stage.stop()
 
     # --- the force guard --------------------------------------------------------------------
+    def _on_parameters_set(self, parameters) -> None:
+        stage = self.device
+        for parameter in parameters:
+            if parameter.name == FORCE_CEILING_NAME and stage is not None:
+                stage.set_force_ceiling(parameter.value)
+
     def _guard_clock(self):
         if not self.sim():
             return time.monotonic
@@ -153,7 +167,18 @@ class StageNode(DeviceNode):
             self.fault(f'force guard: {exc}')
             return
         if trip is not None:
-            self.fault(f'force guard: {trip}')
+            self._report_trip(trip)
+
+    def _report_trip(self, trip) -> None:
+        """A force-guard trip (over the ceiling, or readings gone stale) is not a device fault:
+        the stage is stopped and the guard latched (no pull until the next activate); the stage
+        stays open and keeps reporting that it stands. Reported once, as an ERROR."""
+        reason = f'force guard: {trip}'
+        if reason == self._reported_trip:
+            return
+        self._reported_trip = reason
+        self.get_logger().error(reason)
+        self.report(ERROR, reason)
 
     # --- streaming --------------------------------------------------------------------------
     def _publish_state(self) -> None:
@@ -170,7 +195,10 @@ class StageNode(DeviceNode):
                          velocity=[state.velocity_m_per_s], effort=[0.0])
         msg.header.stamp = self.get_clock().now().to_msg()
         self._state_pub.publish(msg)
-        if state.fault:
+        trip = getattr(stage, 'tripped', None)
+        if trip is not None:
+            self._report_trip(trip)
+        if state.fault and state.fault != str(trip):
             self.fault(f'stage reports a fault: {state.fault}')
 
     # --- commands ---------------------------------------------------------------------------

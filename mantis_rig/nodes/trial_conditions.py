@@ -11,7 +11,17 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields
 import math
 
+from mantis_rig.hardware.interfaces import StageLimits
+from mantis_rig.safety_limits import (
+    FORCE_CEILING_DEFAULT_N,
+    FORCE_CEILING_DESCRIPTION,
+    FORCE_CEILING_RANGE_N,
+)
+
 BACKENDS = ('sim', 'hardware')
+_STAGE = StageLimits()                      # the driver's envelope: speed ceiling and travel
+MAX_SPEED_MM_S = _STAGE.max_speed_m_per_s * 1e3
+MAX_TRAVEL_MM = (_STAGE.max_position_m - _STAGE.min_position_m) * 1e3
 MEDIA = ('air', 'water', 'vacuum')
 
 
@@ -27,12 +37,14 @@ class Spec:
 
 PARAMETERS = {
     # trial conditions
-    'pull_speed_mm_s': Spec(2.33, 'mm/s', 'stage pull speed during the trial', 0.05, 2.4),
+    'pull_speed_mm_s': Spec(2.33, 'mm/s', 'stage pull speed during the trial', 0.05,
+                            MAX_SPEED_MM_S),
     'medium': Spec('air', '', 'medium around the robot', choices=MEDIA),
     'd_t_mm': Spec(23.0, 'mm', 'tendon guide distance from the body pivot', 1.0, 100.0),
     'contact_angle_deg': Spec(3.0, 'deg', 'contact angle (shim)', -45.0, 45.0),
-    'force_ceiling_n': Spec(30.0, 'N', 'abort above this tendon force', 0.5, 100.0),
-    'travel_mm': Spec(8.0, 'mm', 'abort when the pull has gone this far', 0.1, 24.0),
+    'force_ceiling_n': Spec(FORCE_CEILING_DEFAULT_N, 'N', FORCE_CEILING_DESCRIPTION,
+                            *FORCE_CEILING_RANGE_N),
+    'travel_mm': Spec(8.0, 'mm', 'abort when the pull has gone this far', 0.1, MAX_TRAVEL_MM),
     'operator_note': Spec('', '', 'free text stored with the trial'),
     'scene': Spec('', '', 'simulated scene (sim backend) or rig description'),
     'backend': Spec('sim', '', 'device backend the stack runs with', choices=BACKENDS),
@@ -40,7 +52,10 @@ PARAMETERS = {
     'out': Spec('trials', '', 'directory under which each trial gets its bag directory'),
     'tare': Spec(False, '', 'tare the load cell after taking up slack (hardware: true)'),
     'slack_force_n': Spec(0.3, 'N', 'the tendon counts as taut above this force', 0.01, 5.0),
-    'slack_speed_mm_s': Spec(0.2, 'mm/s', 'stage speed while taking up slack', 0.01, 2.4),
+    'slack_speed_mm_s': Spec(0.2, 'mm/s', 'stage speed while taking up slack', 0.01,
+                             MAX_SPEED_MM_S),
+    'supervisor_force_monitor': Spec(True, '', 'the supervisor aborts above force_ceiling_n '
+                                     'itself (false only to test the guards beneath it)'),
     'release_jump_n': Spec(1.0, 'N', 'release: 1 ms mean force moves by more than this',
                            0.05, 50.0),
     'frame_rate_hz': Spec(19000.0, 'frames/s', 'camera frame rate', 1.0, 37000.0),
@@ -98,6 +113,7 @@ class TrialConditions:
     pre_trigger_s: float = PARAMETERS['pre_trigger_s'].default
     post_trigger_s: float = PARAMETERS['post_trigger_s'].default
     expect_markers: bool = True
+    supervisor_force_monitor: bool = True
     phase_timeout_s: float = PARAMETERS['phase_timeout_s'].default
     position_tolerance_mm: float = PARAMETERS['position_tolerance_mm'].default
     start_position_mm: float = PARAMETERS['start_position_mm'].default

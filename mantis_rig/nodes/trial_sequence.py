@@ -18,6 +18,8 @@ import threading
 import time
 from typing import Protocol
 
+from mantis_rig.safety_limits import FORCE_CEILING_NAME, FORCE_GUARD_NODES
+
 from .force_monitor import ForceMonitor
 from .trial_conditions import TrialConditions
 
@@ -76,6 +78,7 @@ class RigPort(Protocol):
     def call(self, service: str) -> Pending: ...          # std_srvs/Trigger, e.g. 'stage/home'
     def set_camera(self, frame_rate_hz: float, pre_trigger_s: float,
                    post_trigger_s: float) -> Pending: ...
+    def set_parameters(self, node: str, values: dict) -> Pending: ...
     def move_at(self, velocity_m_per_s: float) -> None: ...
     def move_to(self, position_m: float) -> None: ...
     def stop_stage(self) -> None: ...                     # velocity 0 and stage/stop, at once
@@ -177,7 +180,7 @@ class TrialSequence:
                        and not self._released.is_set())
             if release:
                 self._released.set()
-        if hit is not None and self.running:
+        if hit is not None and self.running and self.conditions.supervisor_force_monitor:
             self.abort(f'force ceiling: {hit[1]:.2f} N > {self.conditions.force_ceiling_n} N '
                        f'at t = {hit[0]:.4f} s')
         elif release and not self._abort.is_set():
@@ -256,6 +259,10 @@ class TrialSequence:
             if steps is None:
                 self._fail(f'{node} is {label}, cannot bring it up'
                            + self._device_hint(node))
+            if node in FORCE_GUARD_NODES:       # one ceiling for every guard
+                self._await(self.rig.set_parameters(
+                    node, {FORCE_CEILING_NAME: self.conditions.force_ceiling_n}),
+                    f'setting the force ceiling on {node}')
             for transition in steps:
                 self._transition(node, transition)
         self._active_devices = True
