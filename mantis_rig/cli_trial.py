@@ -16,6 +16,7 @@ from .nodes.trial_conditions import (
 )
 
 USAGE_ERROR = 2
+LOG_WRITE_FAILED = 'log write failed'     # the supervisor's reason (supervisor_node)
 PROCESSES = ('single', 'multi')
 
 
@@ -207,7 +208,10 @@ class _TrialRun:
         if self.final is None:
             client.call('abort', timeout_s=5.0)
             raise StackError(f'no end of trial within {timeout_s} s; aborted')
-        if not _wait_closed(self.bag, 30.0):
+        if not _wait_closed(self.bag, 30.0, failed=lambda: client.reason.startswith(
+                LOG_WRITE_FAILED)):
+            if client.reason.startswith(LOG_WRITE_FAILED):
+                raise StackError(client.reason)
             raise StackError(f'the trial ended ({self.final}) but its log {self.bag} was not '
                              f'closed within 30 s')
 
@@ -224,10 +228,10 @@ def _signum(signals) -> int:
     return signals.first.signum if signals.first is not None else signal.SIGINT
 
 
-def _wait_closed(bag: Path, timeout_s: float) -> bool:
+def _wait_closed(bag: Path, timeout_s: float, failed=lambda: False) -> bool:
     deadline = time.monotonic() + timeout_s
     while not (bag / 'metadata.yaml').exists():
-        if time.monotonic() > deadline:
+        if time.monotonic() > deadline or failed():
             return False
         time.sleep(0.05)
     return True

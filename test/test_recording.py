@@ -23,6 +23,7 @@ from mantis_rig.recording import (
     BagClosedError,
     BagError,
     BagReader,
+    BagWriteError,
     BagWriter,
     TruncatedBagWarning,
     read_bag,
@@ -457,3 +458,41 @@ def test_background_sync_bounds_the_loss(tmp_path):
         got = [m.message.data for m in read_bag(snapshot(tmp_path / 'open', tmp_path / 'crash'))]
     assert got == ['lonely']
     writer.close()
+
+
+def fail_writes_beyond(monkeypatch, limit_bytes):
+    """Every bag file write that would pass `limit_bytes` fails as on a full disk."""
+    import errno
+
+    from mantis_rig.recording import writer as writer_module
+    write = writer_module._AppendOnlyFile.write
+
+    def limited(self, data):
+        if self.bytes_written + len(data) > limit_bytes:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return write(self, data)
+    monkeypatch.setattr(writer_module._AppendOnlyFile, 'write', limited)
+
+
+def test_a_write_failure_is_reported_once_and_keeps_what_was_synced(tmp_path, monkeypatch):
+    writer = BagWriter(tmp_path / 'full', sync_period_s=0, chunk_size_bytes=1024)
+    failures = []
+    writer.on_failure = failures.append
+    for i in range(20):
+        writer.write('/events', String(data=f'{i:04d}' * 50), T0_NS + i)
+    writer.sync()
+    synced = writer.durable_message_count
+    assert synced == 20
+    fail_writes_beyond(monkeypatch, writer._file.bytes_written + 10)
+    with pytest.raises(BagWriteError, match='No space left on device') as raised:
+        for i in range(20, 200):
+            writer.write('/events', String(data=f'{i:04d}' * 50), T0_NS + i)
+    assert raised.value.durable_messages == synced
+    with pytest.raises(BagWriteError):           # and so on: the bag takes no more
+        writer.write('/events', String(data='late'), T0_NS + 1000)
+    writer.close(trial_outcome={'result': 'aborted'})      # does not raise
+    assert failures == [raised.value]
+    assert not (tmp_path / 'full' / 'metadata.yaml').exists()
+    with pytest.warns(TruncatedBagWarning):
+        got = [m.message.data for m in read_bag(tmp_path / 'full')]
+    assert got[:synced] == [f'{i:04d}' * 50 for i in range(synced)]

@@ -1,6 +1,6 @@
 """Stopping a trial from outside (issue 11): SIGINT or SIGTERM to `mantis trial`, to its
 process group as a terminal sends it or to the process alone, in either layout; a second
-Ctrl-C during the shutdown; a node process killed by its own signal.
+Ctrl-C during the shutdown; a node process killed by its own signal; the log's disk full.
 
 Each checks the bag (the reason recorded, metadata.yaml written, the stage's last commanded
 velocity 0 and the stage standing within 0.1 s of rig time after it), the exit status
@@ -8,8 +8,11 @@ velocity 0 and the stage standing within 0.1 s of rig time after it), the exit s
 is required within 3 s; the bound here is 8 s so that a busy machine does not fail the test
 (the figure itself is printed by bench/bench_trial.py --stop).
 """
+import errno
 import os
 from pathlib import Path
+import re
+import resource
 import signal
 import subprocess
 import sys
@@ -17,8 +20,12 @@ import threading
 import time
 
 import pytest
+import rclpy
 
-from mantis_rig.recording import BagReader
+from mantis_rig.nodes.bringup import Stack, StackConfig
+from mantis_rig.nodes.trial_client import TrialClient
+from mantis_rig.recording import BagReader, TruncatedBagWarning
+from mantis_rig.recording import writer as writer_module
 
 REPO = Path(__file__).resolve().parents[1]
 EXIT_BOUND_S = 8.0
@@ -31,13 +38,13 @@ pytestmark = pytest.mark.timeout(300)
 class TrialProcess:
     """`mantis trial` in a session of its own, its output collected as it comes."""
 
-    def __init__(self, tmp_path, processes='single', extra=()):
+    def __init__(self, tmp_path, processes='single', extra=(), preexec_fn=None):
         self.process = subprocess.Popen(
             [sys.executable, '-m', 'mantis_rig.cli', 'trial', '--backend', 'sim',
              '--scene', 'air_23mm', '--out', str(tmp_path), '--processes', processes,
              '--log-dir', str(tmp_path / 'logs'), *extra],
             cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-            start_new_session=True)
+            start_new_session=True, preexec_fn=preexec_fn)
         self.stdout, self.stderr = [], []
         self._bag_seen = threading.Event()
         self._readers = [threading.Thread(target=self._read, args=(stream, lines), daemon=True)
@@ -203,3 +210,67 @@ def test_a_node_process_killed_by_its_own_signal_aborts_the_trial(trial):
     assert reader.metadata('trial_outcome')['result'] == 'aborted'
     time.sleep(0.5)
     assert [pid for pid in children if running(pid)] == []
+
+
+LOG_FAILED = (r'log write failed at rig time [\d.]+ s: {cause}; stage stopped; (\d+) messages '
+              r'written before the failure')
+
+
+def test_a_full_disk_mid_pull_stops_the_stage_and_keeps_what_was_written(tmp_path,
+                                                                          monkeypatch):
+    """A bag writer whose disk fills up mid-pull (every write from then on fails with ENOSPC):
+    the stage stops, the trial ends aborted with the reason, the bag reads up to the failure."""
+    rclpy.init()
+    stack = Stack(StackConfig(scene='air_23mm', supervisor={'out': str(tmp_path)}))
+    client = TrialClient()
+    stack.add_node(client)
+    try:
+        stack.start()
+        assert client.wait_for_supervisor(60.0)
+        ok, message = client.start_trial()
+        assert ok, message
+        bag = Path(message.rsplit('logging to ', 1)[-1])
+        assert client.wait_for_state(('pulling',), client.trial_start, 90.0) == 'pulling'
+        time.sleep(1.0)         # > the writer's 0.5 s sync period: something is on disk
+
+        def disk_full(self, data):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        monkeypatch.setattr(writer_module._AppendOnlyFile, 'write', disk_full)
+        final = client.wait_for_end(60.0)
+        reason = stack.node('supervisor_node').last_abort_reason
+        world = stack.node('sim_world_node').world
+        deadline = time.monotonic() + 10.0
+        while world.stage_velocity_m_per_s() != 0.0 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        stage_velocity = world.stage_velocity_m_per_s()
+    finally:
+        stack.stop()
+        client.destroy_node()
+        rclpy.try_shutdown()
+    assert final == 'aborted'
+    match = re.fullmatch(LOG_FAILED.format(cause='No space left on device'), reason)
+    assert match, reason
+    assert stage_velocity == 0.0
+    assert not (bag / 'metadata.yaml').exists()
+    with pytest.warns(TruncatedBagWarning):
+        reader = BagReader(bag)
+        messages = list(reader.messages())
+    assert len(messages) >= int(match[1]) > 0
+    assert 'pulling' in [m.message.data for m in messages if m.topic == '/supervisor/state']
+
+
+def test_mantis_trial_exits_1_with_one_line_when_the_log_cannot_be_written(trial):
+    """The same from the command line, the write error real: the process may write files of
+    at most 40 kB (RLIMIT_FSIZE), so the bag's file fails with EFBIG early in the trial."""
+    def small_files():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)      # EFBIG instead of the signal
+        resource.setrlimit(resource.RLIMIT_FSIZE, (40_000, 40_000))
+    run = trial('single', preexec_fn=small_files)
+    status = run.wait(timeout_s=120.0)
+    stderr = '\n'.join(run.stderr)
+    assert status == 1, stderr
+    assert 'Traceback' not in stderr, stderr
+    ours = [line for line in run.stderr if line.startswith('mantis trial: ')]
+    assert len(ours) == 1, stderr
+    assert re.fullmatch('mantis trial: ' + LOG_FAILED.format(cause='File too large'), ours[0])
+    assert [pid for pid in run.children() if running(pid)] == []

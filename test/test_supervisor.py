@@ -425,3 +425,23 @@ def test_supervisor_refuses_bad_input_with_the_reason(ros, tmp_path, monkeypatch
     assert bag.metadata('trial_conditions')['operator_note'] == 'no devices'
     states = [m.message.data for m in bag.messages(['/supervisor/state'])]
     assert states[-2:] == ['configuring', 'aborted']
+
+
+def test_a_trial_needs_room_on_disk_for_its_bag(tmp_path):
+    from collections import namedtuple
+
+    from mantis_rig.nodes.log_space import estimate_bag_bytes, free_space_problem
+    usage = namedtuple('usage', 'total used free')
+    conditions = TrialConditions()
+    # a full simulated air_23mm trial's bag is 1.5 MB compressed; the estimate is uncompressed
+    assert 2e6 < estimate_bag_bytes(conditions) < 20e6
+    assert estimate_bag_bytes(TrialConditions(pull_speed_mm_s=0.1)) > \
+        estimate_bag_bytes(conditions)                      # a slower pull, a longer log
+    plenty = free_space_problem(tmp_path, conditions, lambda path: usage(0, 0, 10**12))
+    assert plenty is None
+    asked = []
+    short = free_space_problem(tmp_path / 'not' / 'yet', conditions,
+                               lambda path: asked.append(path) or usage(0, 0, 1_000_000))
+    assert asked == [tmp_path]                 # the nearest directory that exists
+    assert short.startswith(f'only 1.0 MB free under {tmp_path / "not" / "yet"}; a trial\'s '
+                            f'bag needs about ')

@@ -24,11 +24,12 @@ from sensor_msgs.msg import JointState, TimeReference
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
-from mantis_rig.recording import TRIAL_CONDITIONS, BagWriter
+from mantis_rig.recording import TRIAL_CONDITIONS, BagWriteError, BagWriter
 from mantis_rig.recording.force_block import force_block_from_msg
 from mantis_rig.recording.marker_block import marker_block_from_msg
 
 from .executors import SideNode, light_executor, run_node
+from .log_space import free_space_problem
 from .recorder import LATCHED, RELIABLE, Recorder
 from .rig_client import RigClient
 from .trial_conditions import PARAMETERS, ConditionError, TrialConditions, check_value
@@ -151,10 +152,14 @@ class SupervisorNode(Node):
         try:
             conditions = self.conditions()
             path = bag_directory(conditions.out)
+            problem = free_space_problem(path.parent, conditions)
+            if problem:
+                return False, f'cannot start a trial: {problem}'
             bag = BagWriter(path)
-        except (ConditionError, OSError) as exc:
+            bag.add_metadata(TRIAL_CONDITIONS, conditions.metadata())
+        except (ConditionError, OSError, BagWriteError) as exc:
             return False, f'cannot start a trial: {exc}'
-        bag.add_metadata(TRIAL_CONDITIONS, conditions.metadata())
+        bag.on_failure = self._on_log_failure
         self.bag, self.bag_path = bag, path
         self.trials += 1
         self._final_state_bytes = None
@@ -172,8 +177,20 @@ class SupervisorNode(Node):
         ok, message = self.sequence.abort(reason)
         return ok, message
 
+    def _on_log_failure(self, failure: BagWriteError) -> None:
+        """The bag cannot be written (disk full, directory removed): stop the stage and end
+        the trial; what was synced before stays readable."""
+        sequence = self.sequence
+        reason = (f'log write failed at rig time {self.rig.now_s():.3f} s: '
+                  f'{failure.cause.strerror or failure.cause}; stage stopped; '
+                  f'{failure.durable_messages} messages written before the failure')
+        self.get_logger().error(reason)
+        if sequence is not None:
+            sequence.abort(reason)
+
     def _close_log(self, outcome: dict) -> None:
-        self._final_state_logged.wait(LOG_TAIL_WAIT_S)
+        if self.bag is not None and self.bag.failure is None:
+            self._final_state_logged.wait(LOG_TAIL_WAIT_S)
         self.recorder.stop()
         bag, self.bag = self.bag, None
         if bag is not None:

@@ -5,11 +5,13 @@ from __future__ import annotations
 import threading
 import time
 
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from .recorder import LATCHED
+from .recorder import LATCHED, RELIABLE
+from .supervisor_node import STATUS_NAME
 
 
 class TrialClient(Node):
@@ -21,11 +23,18 @@ class TrialClient(Node):
         self._start = self.create_client(Trigger, '/supervisor/start_trial')
         self._abort = self.create_client(Trigger, '/supervisor/abort')
         self.create_subscription(String, '/supervisor/state', self._on_state, LATCHED)
+        self.reason = ''            # the supervisor's reason for its state (its /diagnostics)
+        self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, RELIABLE)
 
     def _on_state(self, msg) -> None:
         with self._changed:
             self.states.append(msg.data)
             self._changed.notify_all()
+
+    def _on_diagnostics(self, msg) -> None:
+        for status in msg.status:
+            if status.name == STATUS_NAME:
+                self.reason = next((kv.value for kv in status.values if kv.key == 'reason'), '')
 
     def wait_for_supervisor(self, timeout_s: float = 60.0, alive=lambda: None) -> bool:
         """Wait for /supervisor/start_trial; ``alive()`` may raise to stop waiting."""

@@ -51,6 +51,16 @@ class BagClosedError(RuntimeError):
     """The bag was written to after close()."""
 
 
+class BagWriteError(BagClosedError):
+    """Writing the bag failed (disk full, directory removed): the bag takes no more messages;
+    what was synced before the failure stays readable (`mantis recover` completes it)."""
+
+    def __init__(self, path, cause: OSError, durable_messages: int):
+        self.cause = cause
+        self.durable_messages = durable_messages
+        super().__init__(f'{path}: {cause.strerror or cause}')
+
+
 def mcap_file_name(bag_dir):
     return f'{Path(bag_dir).name}_0.mcap'
 
@@ -122,6 +132,8 @@ class BagWriter:
         self._unsynced_since = None  # monotonic time of the oldest message not yet on disk
         self._sync_period_s = sync_period_s
         self._closed = False
+        self.failure: BagWriteError | None = None
+        self.on_failure = None      # called once, with the BagWriteError, by the failing thread
         self._stop = threading.Event()
         self._syncer = None
         if sync_period_s and sync_period_s > 0:
@@ -213,35 +225,49 @@ class BagWriter:
                 raise KeyError(f'topic {topic!r} is not registered; call add_topic() '
                                'first') from None
             self._sequence[topic] += 1
-            self._mcap.add_message(
-                channel_id=channel_id, log_time=t_ns, data=bytes(data),
-                publish_time=t_ns if publish_time_ns is None else int(publish_time_ns),
-                sequence=self._sequence[topic] & 0xFFFFFFFF)
-            record.message_count += 1
-            self._first_ns = t_ns if self._first_ns is None else min(self._first_ns, t_ns)
-            self._last_ns = t_ns if self._last_ns is None else max(self._last_ns, t_ns)
-            if self._unsynced_since is None:
-                self._unsynced_since = time.monotonic()
-            if self._file.bytes_written != self._synced_bytes:  # a chunk just went out
-                self._sync_file()
+            try:
+                self._mcap.add_message(
+                    channel_id=channel_id, log_time=t_ns, data=bytes(data),
+                    publish_time=t_ns if publish_time_ns is None else int(publish_time_ns),
+                    sequence=self._sequence[topic] & 0xFFFFFFFF)
+                record.message_count += 1
+                self._first_ns = t_ns if self._first_ns is None else min(self._first_ns, t_ns)
+                self._last_ns = t_ns if self._last_ns is None else max(self._last_ns, t_ns)
+                if self._unsynced_since is None:
+                    self._unsynced_since = time.monotonic()
+                if self._file.bytes_written != self._synced_bytes:  # a chunk just went out
+                    self._sync_file()
+            except OSError as exc:
+                raise self._fail(exc) from exc
 
     def add_metadata(self, name, data):
         """Write an MCAP metadata record now (e.g. 'trial_conditions'), then sync to disk."""
         data = _as_str_map(name, data)
         with self._lock:
             self._check_open()
-            self._mcap.add_metadata(name, data)
-            self._sync_chunk()
+            try:
+                self._mcap.add_metadata(name, data)
+                self._sync_chunk()
+            except OSError as exc:
+                raise self._fail(exc) from exc
 
     def sync(self):
         """Close the open chunk (if any) and fsync: everything written so far is on disk."""
         with self._lock:
             if not self._closed:
-                self._sync_chunk()
+                self._check_open()
+                try:
+                    self._sync_chunk()
+                except OSError as exc:
+                    raise self._fail(exc) from exc
 
     # ---------------------------------------------------------------- closing
     def close(self, trial_outcome=None):
-        """Write ``trial_outcome`` (if given), the summary and metadata.yaml. Idempotent."""
+        """Write ``trial_outcome`` (if given), the summary and metadata.yaml. Idempotent.
+
+        After a write failure (see `failure`) it only closes the file: the bag stays as it was
+        synced, without summary or metadata.yaml, for `mantis recover`. A failure while
+        closing is recorded the same way; close() itself does not raise it."""
         outcome = None if trial_outcome is None else _as_str_map(TRIAL_OUTCOME, trial_outcome)
         with self._lock:
             if self._closed:
@@ -249,18 +275,27 @@ class BagWriter:
             self._closed = True
             self._stop.set()
             try:
-                if outcome is not None:
-                    self._mcap.add_metadata(TRIAL_OUTCOME, outcome)
-                summary = self._bag_summary()
-                self._mcap.add_metadata(ROSBAG2_RECORD_NAME,
-                                        {ROSBAG2_RECORD_KEY: serialized_metadata(summary)})
-                self._mcap.finish()
-                self._file.flush_and_sync()
+                if self.failure is None:
+                    self._finish(outcome)
+            except OSError as exc:
+                self._fail(exc)
             finally:
-                self._file.close()
-            write_metadata_yaml(self.path, summary)
+                try:
+                    self._file.close()
+                except OSError:
+                    pass
         if self._syncer is not None and self._syncer is not threading.current_thread():
             self._syncer.join(timeout=5.0)
+
+    def _finish(self, outcome) -> None:
+        if outcome is not None:
+            self._mcap.add_metadata(TRIAL_OUTCOME, outcome)
+        summary = self._bag_summary()
+        self._mcap.add_metadata(ROSBAG2_RECORD_NAME,
+                                {ROSBAG2_RECORD_KEY: serialized_metadata(summary)})
+        self._mcap.finish()
+        self._file.flush_and_sync()
+        write_metadata_yaml(self.path, summary)
 
     def __enter__(self):
         return self
@@ -270,8 +305,21 @@ class BagWriter:
 
     # ---------------------------------------------------------------- internals
     def _check_open(self):
+        if self.failure is not None:
+            raise self.failure
         if self._closed:
             raise BagClosedError(f'{self.path}: bag is closed')
+
+    def _fail(self, cause: OSError) -> BagWriteError:
+        """Record the first write failure (and tell on_failure); the error to raise."""
+        with self._lock:
+            first = self.failure is None
+            if first:
+                self.failure = BagWriteError(self.path, cause, self._durable_messages)
+            failure = self.failure
+        if first and self.on_failure is not None:
+            self.on_failure(failure)
+        return failure
 
     def _bag_summary(self):
         first = self._first_ns or 0
@@ -301,6 +349,12 @@ class BagWriter:
             with self._lock:
                 if self._closed:
                     return
+                if self.failure is not None:
+                    return
                 since = self._unsynced_since
                 if since is not None and time.monotonic() - since >= period:
-                    self._sync_chunk()
+                    try:
+                        self._sync_chunk()
+                    except OSError as exc:
+                        self._fail(exc)
+                        return
