@@ -36,6 +36,7 @@ from mantis_rig.hardware.local_world import LocalWorldPort
 from mantis_rig.safety_limits import FORCE_CEILING_NAME, FORCE_GUARD_NODES
 
 from .executors import STACK_PARENT_ENV, light_executor, threaded_executor
+from .shared_clock import SharedSimClock
 
 DEVICE_CLASSES = {'stage_node': 'StageNode', 'loadcell_node': 'LoadcellNode',
                   'camera_node': 'CameraNode'}
@@ -133,22 +134,30 @@ class Stack:
 
     def _start_nodes(self) -> None:
         params = self.config.node_parameters()
-        port = None
+        port = clock = None
         try:
             if WORLD_NODE[0] in params:
                 world = _node_class(*WORLD_NODE)(
                     node_name=WORLD_NODE[0], parameter_overrides=_overrides(params[WORLD_NODE[0]]))
                 self._add(world, self.executor)
-                # one process: the simulated devices read the world directly, not over /sim/*
+                # one process: the simulated devices read the world directly, not over /sim/*,
+                # and every node's sim time is set by the world, not by /clock subscriptions
                 port = LocalWorldPort(world.runner)
+                clock = SharedSimClock()
+                world.clock_listeners.append(clock.on_clock)
+                for name in (*DEVICE_CLASSES, SUPERVISOR_NODE[0]):
+                    params[name].pop('use_sim_time', None)
             for name, class_name in DEVICE_CLASSES.items():
-                kwargs = {'world_port': port} if port is not None else {}
+                kwargs = {'world_port': port, 'sim_clock': clock} if port is not None else {}
                 self._add(_node_class(name, class_name)(
                     node_name=name, parameter_overrides=_overrides(params[name]), **kwargs),
                     self.device_executor)
-            self._add(_node_class(*SUPERVISOR_NODE)(
+            supervisor = _node_class(*SUPERVISOR_NODE)(
                 node_name=SUPERVISOR_NODE[0],
-                parameter_overrides=_overrides(params[SUPERVISOR_NODE[0]])), self.executor)
+                parameter_overrides=_overrides(params[SUPERVISOR_NODE[0]]))
+            if clock is not None:
+                clock.attach(supervisor)
+            self._add(supervisor, self.executor)
         except BaseException:
             self.stop()
             raise

@@ -114,10 +114,14 @@ class DeviceNode(LifecycleNode):
     PARAMETERS: tuple = ()
     READS_FORCE = False       # sim: the world's tendon force, not the stage state, over ROS
 
-    def __init__(self, node_name: str, *, world_port=None, **kwargs):
+    def __init__(self, node_name: str, *, world_port=None, sim_clock=None, **kwargs):
         """world_port: a WorldPort for the sim backend (e.g. a LocalWorldPort); by default the
-        node makes a RosWorldPort at configure."""
+        node makes a RosWorldPort at configure. sim_clock: a SharedSimClock that sets this
+        node's time (a one-process stack); by default the sim backend follows /clock."""
         super().__init__(node_name, **kwargs)
+        self._sim_clock = sim_clock
+        if sim_clock is not None:
+            sim_clock.attach(self)
         self._specs = {p.name: p for p in COMMON_PARAMETERS + self.PARAMETERS}
         for spec in self._specs.values():
             declare(self, spec)
@@ -291,7 +295,7 @@ class DeviceNode(LifecycleNode):
 
     def _follow_sim_time(self) -> None:
         """The simulated devices live on the world's clock: stamps must be sim time too."""
-        if not self.get_parameter('use_sim_time').value:
+        if self._sim_clock is None and not self.get_parameter('use_sim_time').value:
             self.get_logger().info('backend sim: following /clock (use_sim_time true)')
             self.set_parameters([Parameter('use_sim_time', value=True)])
 

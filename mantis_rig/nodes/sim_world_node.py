@@ -89,6 +89,8 @@ class SimWorldNode(Node):
         self._stage_pub = self.create_publisher(JointState, STAGE_STATE_TOPIC, STREAM_QOS)
         self._frames_pub = self.create_publisher(Float64MultiArray, CAMERA_FRAMES_TOPIC, 10)
         self._clock_pub = self.create_publisher(Clock, '/clock', QoSProfile(depth=10))
+        # in-process followers of the world's time (a one-process stack's shared sim clock)
+        self.clock_listeners: list = []
         self.create_subscription(Float64MultiArray, STAGE_COMMAND_TOPIC, self._on_stage_command,
                                  10)
         self.create_subscription(Float64MultiArray, CAMERA_REQUEST_TOPIC, self._on_request, 10)
@@ -249,6 +251,9 @@ class _StepRunner(WorldRunner):
                 self.lock.notify_all()
             for publisher, msg in messages:
                 publisher.publish(msg)
+                if isinstance(msg, Clock):
+                    for listener in self.node.clock_listeners:
+                        listener(msg)
         except Exception as exc:
             self.node.get_logger().fatal(f'the simulated world stopped: {exc!r}')
             raise
