@@ -52,7 +52,8 @@ def _stack_arguments(parser) -> None:
                         help='single: all nodes in this process; multi: one process per node')
     parser.add_argument('--real-time-factor', type=float, default=1.0,
                         help='simulated seconds per wall second (sim backend; default 1; '
-                        'simulated time slips when the machine cannot keep up)')
+                        'simulated time slips when the machine cannot keep up; 0: as fast '
+                        'as the stack keeps up, the world waiting for the load cell\'s stream)')
     parser.add_argument('--seed', type=int, default=0, help='sensor noise seed (sim backend)')
     parser.add_argument('--log-dir', type=Path,
                         help='with --processes multi: write each node\'s output here')
@@ -76,8 +77,9 @@ def stack_config(args):
     """A StackConfig from the command line; ConditionError / SceneError say what is wrong."""
     from .nodes.bringup import StackConfig
 
-    if not (args.real_time_factor > 0 and math.isfinite(args.real_time_factor)):
-        raise ConditionError(f'--real-time-factor {args.real_time_factor} must be > 0')
+    if not (args.real_time_factor >= 0 and math.isfinite(args.real_time_factor)):
+        raise ConditionError(f'--real-time-factor {args.real_time_factor} must be >= 0 (0: as '
+                             f'fast as the stack keeps up)')
     supervisor, scene_overrides = {}, []
     for item in args.overrides:
         key, sep, value = item.partition('=')

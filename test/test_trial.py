@@ -9,7 +9,8 @@
 4. Bad command lines (unknown scene, backend, parameter out of range) exit 2 with the reason.
 
 Timing is generous: the machine may be slow and busy. The world runs at real-time factor
-MANTIS_TEST_RTF (default 1); when the machine cannot keep up, simulated time slips.
+MANTIS_TEST_RTF (default 1) where a test acts during the trial; the others run at real-time
+factor 0 (as fast as the stack keeps up). When the machine cannot keep up, simulated time slips.
 """
 import os
 from pathlib import Path
@@ -39,6 +40,7 @@ from mantis_rig.trial_summary import summarize
 REPO = Path(__file__).resolve().parents[1]
 SCENE = 'air_23mm'
 RTF = float(os.environ.get('MANTIS_TEST_RTF', '1.0'))
+FAST = 0.0      # real-time factor 0: as fast as the stack keeps up (what is not about pacing)
 TRIAL_TIMEOUT_S = 240.0
 FAST_RETURN = {'stage_node': {'move_speed_m_per_s': 2.0e-3}}
 
@@ -52,9 +54,9 @@ def ros():
     rclpy.try_shutdown()
 
 
-def start_stack(tmp_path, processes='single', **supervisor):
+def start_stack(tmp_path, processes='single', rtf=RTF, **supervisor):
     config = StackConfig(scene=SCENE, processes=processes,
-                         real_time_factor=RTF,
+                         real_time_factor=rtf,
                          supervisor={'out': str(tmp_path), 'operator_note': 'pytest',
                                      **supervisor},
                          devices=FAST_RETURN)
@@ -204,6 +206,8 @@ def test_bad_command_lines_exit_2_with_the_reason(tmp_path):
     result = run_cli('trial', '--scene', SCENE, '--pull-speed', '9', *out)
     assert result.returncode == 2
     assert 'pull_speed_mm_s = 9.0 mm/s is outside [0.05, 2.4] mm/s' in result.stderr
+    result = run_cli('trial', '--scene', SCENE, '--real-time-factor', '-1', *out)
+    assert result.returncode == 2 and '--real-time-factor -1.0 must be >= 0' in result.stderr
     result = run_cli('trial', '--scene', SCENE, '--set', 'loadcell.noise_N=-1', *out)
     assert result.returncode == 2 and 'noise_N' in result.stderr
     assert not any(tmp_path.iterdir())            # nothing was started or logged
@@ -212,7 +216,7 @@ def test_bad_command_lines_exit_2_with_the_reason(tmp_path):
 # ----------------------------------------------------------------------------- 2
 def test_air_23mm_trial_with_every_node_its_own_process(tmp_path):
     result = run_cli('trial', '--backend', 'sim', '--scene', SCENE, '--out', str(tmp_path),
-                     '--processes', 'multi', '--real-time-factor', str(RTF),
+                     '--processes', 'multi', '--real-time-factor', str(FAST),
                      '--set', 'operator_note=pytest', '--log-dir', str(tmp_path / 'logs'),
                      timeout=TRIAL_TIMEOUT_S + 60)
     assert result.returncode == 0, result.stdout + result.stderr
@@ -227,14 +231,14 @@ def test_air_23mm_trial_with_every_node_its_own_process(tmp_path):
 
 # ----------------------------------------------------------------------------- 3
 def test_force_ceiling_below_the_peak_aborts(ros, tmp_path):
-    stack, client = start_stack(tmp_path, force_ceiling_n=13.0)
+    stack, client = start_stack(tmp_path, rtf=FAST, force_ceiling_n=13.0)
     try:
         started, message, final = client.run_trial(timeout_s=TRIAL_TIMEOUT_S)
         assert started, message
         assert final == 'aborted'
         bag = bag_of(message)
         wait_closed(bag)
-        time.sleep(0.5 / RTF)               # let the stage report standing still
+        time.sleep(0.5)                     # let the stage report standing still
         stage = stack.node('sim_world_node').world.stage_velocity_m_per_s()
     finally:
         stack.stop()
@@ -293,7 +297,7 @@ def test_one_force_ceiling_reaches_the_stages_own_guard(tmp_path):
     from 11.3 N during the pull, so that block is the release's force spike (peak 17.9 N, which
     the guard's default 30 N would let pass)."""
     result = run_cli('trial', '--backend', 'sim', '--scene', SCENE, '--out', str(tmp_path),
-                     '--real-time-factor', str(RTF), '--set', 'force_ceiling_n=12',
+                     '--real-time-factor', str(FAST), '--set', 'force_ceiling_n=12',
                      '--set', 'supervisor_force_monitor=false')
     assert result.returncode == 1, result.stdout + result.stderr
     bag = Path(result.stdout.splitlines()[0].removeprefix('bag: '))
