@@ -25,6 +25,7 @@ from std_srvs.srv import Trigger
 from mantis_rig.hardware.interfaces import DeviceError
 from mantis_rig.hardware.world_port import WorldPort
 from mantis_rig.nodes.camera_node import CameraNode
+from mantis_rig.nodes.executors import Spinner
 from mantis_rig.nodes.loadcell_node import LoadcellNode
 from mantis_rig.nodes.sim_world_node import SimWorldNode
 from mantis_rig.nodes.stage_node import StageNode
@@ -66,8 +67,7 @@ class Rig:
             self.received[topic] = []
             self.client.create_subscription(msg_type, topic, self._recorder(topic), 1000)
         self.velocity = self.client.create_publisher(Float64, '/stage/velocity_command', 10)
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self.thread.start()
+        self.spinner = Spinner(self.executor, 'rig')
 
     def add(self, node):
         self.nodes.append(node)
@@ -119,10 +119,7 @@ class Rig:
 
     def close(self):
         """Stop spinning and destroy the nodes; what was received stays readable."""
-        for node in self.nodes:
-            self.executor.remove_node(node)
-        self.executor.shutdown(timeout_sec=10.0)
-        self.thread.join(timeout=10.0)
+        self.spinner.stop(timeout_s=10.0)
         for node in reversed(self.nodes):
             node.destroy_node()
         rclpy.shutdown(context=self.context)

@@ -26,7 +26,6 @@ import signal
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 
 from rclpy.parameter import Parameter
@@ -35,7 +34,7 @@ import yaml
 from mantis_rig.hardware.local_world import LocalWorldPort
 from mantis_rig.safety_limits import FORCE_CEILING_NAME, FORCE_GUARD_NODES
 
-from .executors import STACK_PARENT_ENV, light_executor, threaded_executor
+from .executors import STACK_PARENT_ENV, Spinner, light_executor, threaded_executor
 from .shared_clock import SharedSimClock
 
 DEVICE_CLASSES = {'stage_node': 'StageNode', 'loadcell_node': 'LoadcellNode',
@@ -112,7 +111,7 @@ class Stack:
         self.executor = light_executor()
         # the device nodes: blocking services, backends waiting for the world
         self.device_executor = threaded_executor(EXECUTOR_THREADS)
-        self._threads: list[threading.Thread] = []
+        self._spinners: list[Spinner] = []
         self._params_file: Path | None = None
 
     # ------------------------------------------------------------------ start
@@ -121,11 +120,8 @@ class Stack:
             self._start_processes()
         else:
             self._start_nodes()
-        for name, executor in (('stack-executor', self.executor),
-                               ('stack-devices', self.device_executor)):
-            thread = threading.Thread(target=_spin, args=(executor,), name=name, daemon=True)
-            thread.start()
-            self._threads.append(thread)
+        self._spinners = [Spinner(self.executor, 'stack-executor'),
+                          Spinner(self.device_executor, 'stack-devices')]
         return self
 
     def add_node(self, node) -> None:
@@ -226,14 +222,12 @@ class Stack:
         if supervisor is not None:            # first: it aborts a trial and closes its log
             _end_processes([supervisor], signum)
         _end_processes(self.processes.values(), signum)
-        for executor in (self.executor, self.device_executor):
-            executor.shutdown(timeout_sec=5.0)
+        for spinner in self._spinners:
+            spinner.stop()
         for node in reversed(self.nodes):
             _release(node)
             node.destroy_node()
         self.nodes = []
-        for thread in self._threads:
-            thread.join(timeout=5.0)
         if self._params_file is not None:
             self._params_file.unlink(missing_ok=True)
 
@@ -256,13 +250,6 @@ class Stack:
 
     def __exit__(self, *exc):
         self.stop()
-
-
-def _spin(executor) -> None:
-    try:
-        executor.spin()
-    except Exception:          # shut down under our feet
-        pass
 
 
 def _end_processes(processes, signum: int, grace_s: float = 2.5) -> None:

@@ -14,10 +14,16 @@ from __future__ import annotations
 import os
 import sys
 import threading
+import time
 
 import rclpy
 from rclpy.exceptions import InvalidParameterValueException
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.executors import (
+    ExternalShutdownException,
+    MultiThreadedExecutor,
+    ShutdownException,
+    SingleThreadedExecutor,
+)
 from rclpy.signals import SignalHandlerOptions
 
 from mantis_rig.ros_env import claim_local_domain
@@ -37,6 +43,47 @@ def threaded_executor(num_threads: int = 8, context=None):
     return MultiThreadedExecutor(num_threads=num_threads, context=context)
 
 
+SPIN_CHECK_S = 0.1          # how often a Spinner looks at its stop flag
+
+
+class Spinner:
+    """An executor spun in a thread of its own, and stopped without racing rclpy.
+
+    rclpy 7.1's Executor.shutdown() neither waits for callbacks in progress nor for spin() to
+    leave its wait set, yet destroys the guard condition spin() waits on: the spinning thread
+    then died with "'NoneType' object has no attribute 'handle'", and callbacks still queued
+    ran against destroyed nodes ("The following exception was never retrieved: cannot use
+    Destroyable because destruction was requested"). Here the thread stops first (it spins in
+    slices of SPIN_CHECK_S), then the callbacks a MultiThreadedExecutor handed to its pool
+    finish, and only then is the executor shut down; its nodes can then be destroyed."""
+
+    def __init__(self, executor, name: str):
+        self.executor = executor
+        self.name = name
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self.executor.spin_once(timeout_sec=SPIN_CHECK_S)
+            except (ExternalShutdownException, ShutdownException):
+                return
+            except Exception as exc:      # noqa: BLE001 - one callback's bug: report, go on
+                print(f'{self.name}: a callback failed: {exc!r}', file=sys.stderr, flush=True)
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        self._stop.set()
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout_s)
+        deadline = time.monotonic() + timeout_s
+        for future in list(getattr(self.executor, '_futures', ())):   # MultiThreadedExecutor
+            while not future.done() and time.monotonic() < deadline:
+                time.sleep(0.005)
+        self.executor.shutdown(timeout_sec=0)
+
+
 class SideNode:
     """A node of its own beside `owner`, spun by a SingleThreadedExecutor in its own thread.
 
@@ -48,20 +95,12 @@ class SideNode:
     def __init__(self, owner, suffix: str):
         self.node = rclpy.create_node(f'{owner.get_name()}_{suffix}', context=owner.context,
                                       start_parameter_services=False)
-        self._executor = SingleThreadedExecutor(context=owner.context)
-        self._executor.add_node(self.node)
-        self._thread = threading.Thread(target=self._spin, name=suffix, daemon=True)
-        self._thread.start()
-
-    def _spin(self) -> None:
-        try:
-            self._executor.spin()
-        except Exception:       # noqa: BLE001 - the context went down under us: close() follows
-            pass
+        executor = SingleThreadedExecutor(context=owner.context)
+        executor.add_node(self.node)
+        self._spinner = Spinner(executor, suffix)
 
     def close(self) -> None:
-        self._executor.shutdown(timeout_sec=5.0)
-        self._thread.join(timeout=5.0)
+        self._spinner.stop()
         self.node.destroy_node()
 
 
