@@ -32,7 +32,11 @@ def run_replay(args) -> int:
         except OSError as exc:
             _err('replay', f'warning: real-time scheduling refused ({exc}); playing at normal '
                            'priority')
-    rclpy.init(args=None)
+    from rclpy.signals import SignalHandlerOptions
+
+    from .nodes.stopping import StopRequested, StopSignals
+    signals = StopSignals('mantis replay').install()    # 130 / 143, not rclpy's handler
+    rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node('mantis_replay')
     stop = threading.Event()
     try:
@@ -51,14 +55,25 @@ def run_replay(args) -> int:
                            f'{args.wait_for_subscribers} s; playing anyway')
         try:
             report = player.run(stop)
-        except KeyboardInterrupt:
+        except StopRequested:
             stop.set()
             report = player.report
             report.interrupted = True
+        signals.shield()
         player.wait_for_delivery(timeout_s=2.0)
         print(report)
+        if signals.first is not None:
+            _err('replay', f'{signals.first.reason}')
+            return signals.first.exit_status
+        if not sum(report.published.values()):
+            _err('replay', f'nothing was replayed from {args.bag}: no message to play'
+                           f'{" on the topics asked for" if args.topics else ""}')
+            return 1
         return 0
+    except StopRequested as stop_requested:       # while setting up, before the playback
+        return stop_requested.exit_status
     finally:
+        signals.shield()
         node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()

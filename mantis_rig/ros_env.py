@@ -25,9 +25,19 @@ def _lock_dir() -> Path:
     return path
 
 
+_next_start: list[int] = []     # where this process's next claim starts looking
+
+
 def claim_free_domain() -> int:
-    """Lock and return a ROS domain id that no other process on this machine has claimed."""
-    start = os.getpid() % len(DOMAIN_IDS)
+    """Lock and return a ROS domain id that no other process on this machine has claimed.
+
+    Successive claims of one process move on through the ids rather than taking the one just
+    released: participants of a process that ended without cleaning up (SIGKILL, os._exit)
+    stay in a domain's discovery until their lease runs out, and the next test in that domain
+    would see their services (a ghost /stage_node/get_state that never answers)."""
+    if not _next_start:
+        _next_start.append(os.getpid() % len(DOMAIN_IDS))
+    start = _next_start[0]
     ids = list(DOMAIN_IDS)[start:] + list(DOMAIN_IDS)[:start]
     for domain in ids:
         handle = open(_lock_dir() / f'domain_{domain}.lock', 'w')
@@ -37,6 +47,7 @@ def claim_free_domain() -> int:
             handle.close()
             continue
         _held_locks[domain] = handle
+        _next_start[0] = (DOMAIN_IDS.index(domain) + 1) % len(DOMAIN_IDS)
         return domain
     raise RuntimeError(f'every ROS domain id in {DOMAIN_IDS.start}..{DOMAIN_IDS.stop - 1} is '
                        f'claimed by another process on this machine')

@@ -4,6 +4,7 @@ from contextlib import contextmanager
 import os
 from pathlib import Path
 import shutil
+import signal
 import subprocess
 import sys
 import threading
@@ -275,6 +276,34 @@ def test_missing_bag_gives_error_exit(tmp_path):
     result = run_cli('replay', tmp_path / 'nothing')
     assert result.returncode == 1
     assert 'no such file or directory' in result.stderr
+
+
+def test_nothing_to_replay_is_an_error(tmp_path):
+    with BagWriter(tmp_path / 'empty', sync_period_s=0) as bag:
+        bag.add_topic('/supervisor/state', 'std_msgs/msg/String')
+    result = run_cli('replay', tmp_path / 'empty')
+    assert result.returncode == 1, result.stdout + result.stderr
+    assert 'nothing was replayed from' in result.stderr
+
+
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+def test_a_signal_ends_a_slow_replay_at_once(trial_bag, signum):
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'mantis_rig.cli', 'replay', str(trial_bag), '--rate', '0.01'],
+        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(3.0)                     # started, and sleeping between messages
+        assert process.poll() is None, process.communicate()
+        sent = time.monotonic()
+        process.send_signal(signum)
+        stdout, stderr = process.communicate(timeout=30)
+        waited = time.monotonic() - sent
+    finally:
+        process.kill()
+    assert process.returncode == 128 + signum, stderr
+    assert waited < 5.0, waited            # asked: 0.5 s; bounded generously for a busy CI
+    assert 'Traceback' not in stderr, stderr
+    assert '(interrupted)' in stdout
 
 
 def test_replay_qos_from_offered_profiles():

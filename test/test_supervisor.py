@@ -445,3 +445,14 @@ def test_a_trial_needs_room_on_disk_for_its_bag(tmp_path):
     assert asked == [tmp_path]                 # the nearest directory that exists
     assert short.startswith(f'only 1.0 MB free under {tmp_path / "not" / "yet"}; a trial\'s '
                             f'bag needs about ')
+
+
+def test_successive_ros_domain_claims_move_on():
+    """A test never gets the domain the previous one just left (its processes' participants
+    may still linger there in discovery)."""
+    from mantis_rig.ros_env import claim_free_domain, release_domain
+    first = claim_free_domain()
+    release_domain(first)
+    second = claim_free_domain()
+    release_domain(second)
+    assert second != first
