@@ -189,14 +189,23 @@ def _check_value(key: str, meta: dict, annotation: str, value: Any) -> Any:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ParameterError(f'{key} = {value!r} is not a number '
                              f'(valid range {_range_text(meta)})')
-    if annotation == 'int' and float(value) != int(value):
-        raise ParameterError(f'{key} = {value!r} must be a whole number')
-    value = int(value) if annotation == 'int' else float(value)
+    try:
+        if annotation == 'int' and float(value) != int(value):
+            raise ParameterError(f'{key} = {value!r} must be a whole number')
+        value = int(value) if annotation == 'int' else float(value)
+    except OverflowError:          # an integer too big for a float (a 400-digit number)
+        raise ParameterError(f'{key} = {_short(value)} is out of range; valid range '
+                             f'{_range_text(meta)}') from None
     lo, hi = meta['lo'], meta['hi']
     too_low = lo is not None and (value <= lo if meta['lo_open'] else value < lo)
     if not math.isfinite(value) or too_low or (hi is not None and value > hi):
         raise ParameterError(f'{key} = {value!r} is out of range; valid range {_range_text(meta)}')
     return value
+
+
+def _short(value, limit: int = 40) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else f'{text[:limit]}... ({len(text)} characters)'
 
 
 def _range_text(meta: dict) -> str:

@@ -139,6 +139,10 @@ def _check_consistency(scene: Scene) -> None:
                              f'>= geometry.contact_angle_deg = {g.contact_angle_deg}')
 
 
+#: What a scene file must state; every other section has a documented default.
+REQUIRED_FILE_KEYS = ('name', 'effects', 'geometry', 'medium', 'tendon', 'drive')
+
+
 def scene_from_dict(data, name: str = '<scene>') -> Scene:
     if not isinstance(data, dict):
         raise SceneError(f'{name}: a scene must be a YAML mapping, got {type(data).__name__}')
@@ -175,15 +179,26 @@ def _yaml_problem(exc: yaml.YAMLError) -> str:
 
 def load_scene_file(path: Path) -> Scene:
     try:
-        data = yaml.safe_load(Path(path).read_text())
+        data = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
+    except UnicodeDecodeError as exc:
+        raise SceneError(f'{path}: not UTF-8 text (byte {exc.start}: '
+                         f'{exc.object[exc.start:exc.start + 1]!r})') from None
     except yaml.YAMLError as exc:
         raise SceneError(f'{path}: not valid YAML{_yaml_problem(exc)}') from None
     except OSError as exc:
         raise SceneError(f'{path}: cannot read: {exc.strerror}') from None
     try:
-        return scene_from_dict(data, Path(path).stem)
+        scene = scene_from_dict(data, Path(path).stem)
     except ParameterError as exc:
         raise ParameterError(f'{path}: {exc}') from None
+    missing = [key for key in REQUIRED_FILE_KEYS if key not in data]
+    if missing:
+        raise SceneError(
+            f'{path}: missing required key(s) {", ".join(missing)}: a scene file states '
+            f'{", ".join(REQUIRED_FILE_KEYS)} (effects may be []); the other sections '
+            f'({", ".join(k for k in SECTIONS if k not in REQUIRED_FILE_KEYS)}) default to the '
+            f'published robot. A file cut short must not run on defaults.')
+    return scene
 
 
 def scene_dirs() -> list[Path]:

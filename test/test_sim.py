@@ -23,6 +23,7 @@ test_results_converge_as_tolerance_tightens.
 """
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -35,6 +36,8 @@ from mantis_sim.mechanism import Mechanism
 from mantis_sim.parameters import ParameterError
 from mantis_sim.results import JSON_KEYS, simulate
 from mantis_sim.scene import SceneError, available_scenes, load_scene
+
+REPO = Path(__file__).resolve().parents[1]
 
 PHASE_ORDER = ('I', 'II', 'III', 'IV')
 NOMINAL_EVENTS = ['unlatch', 'overcenter', 'max_contraction', 'peak']
@@ -615,6 +618,24 @@ def test_unknown_and_malformed_scenes(tmp_path):
     bad.write_text('geometry: {L1_mm: [1\n')
     with pytest.raises(SceneError, match='not valid YAML at line 2, column 1'):
         load_scene(str(bad))
+
+
+def test_damaged_scene_files_are_refused_with_the_reason(tmp_path):
+    text = (REPO / 'config' / 'scenes' / 'air_23mm.yaml').read_text()
+    huge = tmp_path / 'huge.yaml'
+    huge.write_text(text.replace('d_t_mm: 23.0', 'd_t_mm: ' + '9' * 400))
+    with pytest.raises(ParameterError, match=r'geometry.d_t_mm = 9+\.\.\. \(400 characters\) '
+                                             r'is out of range'):
+        load_scene(str(huge))
+    latin1 = tmp_path / 'latin1.yaml'
+    latin1.write_bytes(text.encode() + b'# caf\xe9\n')
+    with pytest.raises(SceneError, match='not UTF-8 text'):
+        load_scene(str(latin1))
+    cut = tmp_path / 'cut.yaml'
+    cut.write_text(text[:58])
+    with pytest.raises(SceneError, match='missing required key.*effects, geometry, medium, '
+                                         'tendon, drive'):
+        load_scene(str(cut))
 
 
 def _bad_files(tmp_path):
