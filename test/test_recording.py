@@ -347,6 +347,13 @@ def test_not_a_bag_errors_name_the_file(tmp_path):
     (broken_yaml / 'metadata.yaml').write_text('rosbag2_bagfile_information: [unclosed')
     with pytest.raises(BagError, match='metadata.yaml'):
         BagReader(broken_yaml)
+    null_file = tmp_path / 'null_file'
+    null_file.mkdir()
+    (null_file / 'metadata.yaml').write_text(
+        'rosbag2_bagfile_information:\n  storage_identifier: mcap\n'
+        '  relative_file_paths: [~]\n')
+    with pytest.raises(BagError, match='relative_file_paths must be a list of file names'):
+        BagReader(null_file)
     (tmp_path / 'notes.txt').write_text('hello')
     with pytest.raises(BagError, match='notes.txt'):
         BagReader(tmp_path / 'notes.txt')
@@ -422,6 +429,10 @@ def test_main_recover_cli(tmp_path, capsys):
     assert BagReader(tmp_path / 'fixed').complete
     assert main_recover([str(tmp_path / 'nothing_here')]) == 1
     assert 'no such file' in capsys.readouterr().err
+    with BagWriter(tmp_path / 'empty', sync_period_s=0) as empty:
+        empty.add_topic('/events', 'std_msgs/msg/String')
+    assert main_recover([str(tmp_path / 'empty'), '-o', str(tmp_path / 'empty_out')]) == 1
+    assert 'no message could be recovered from' in capsys.readouterr().err
     shutil.rmtree(tmp_path / 'fixed')
 
 

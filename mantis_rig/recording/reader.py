@@ -74,7 +74,11 @@ def _locate(path):
         if storage != 'mcap':
             raise BagError(f'{yaml_path}: storage_identifier is {storage!r}, only mcap bags '
                            'are supported')
-        files = [path / name for name in info.get('relative_file_paths') or []]
+        names = info.get('relative_file_paths') or []
+        if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
+            raise BagError(f'{yaml_path}: relative_file_paths must be a list of file names, '
+                           f'not {names!r}')
+        files = [path / name for name in names]
         missing = [str(f) for f in files if not f.exists()]
         if missing or not files:
             raise BagError(f'{yaml_path}: lists storage files that do not exist: {missing}')

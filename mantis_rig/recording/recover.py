@@ -82,4 +82,7 @@ def main_recover(argv=None):
         print(f'mantis recover: {exc}', file=sys.stderr)
         return 1
     print(report)
+    if report.messages_recovered == 0:
+        print(f'mantis recover: no message could be recovered from {args.bag}', file=sys.stderr)
+        return 1
     return 0
