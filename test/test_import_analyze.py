@@ -328,3 +328,55 @@ def test_given_condition_out_of_range_is_refused(capsys, tmp_path, option, value
     code, _, err = run(capsys, 'import-tracking', tmp_path / 'absent.csv', '--out', out,
                        option, value)
     assert code == 2 and f'{option}: {why}' in err and not out.exists()
+
+
+def rewritten_copy(bag, dest, replace):
+    """A copy of ``bag`` with the second message on /camera/markers replaced by
+    ``replace(message)`` (bytes, CDR): contents that pass every CRC but are wrong."""
+    from mantis_rig.recording import BagReader, BagWriter
+    reader = BagReader(bag)
+    seen = 0
+    with BagWriter(dest, sync_period_s=0) as out:
+        for topic, info in reader.topics.items():
+            out.add_topic(topic, info.type_name)
+        for name in ('trial_conditions',):
+            if reader.metadata(name):
+                out.add_metadata(name, reader.metadata(name))
+        for channel, _, message in reader.raw_messages():
+            data = message.data
+            if channel.topic == '/camera/markers':
+                seen += 1
+                if seen == 2:
+                    data = replace(message)
+            out.write_serialized(channel.topic, data, message.log_time)
+    assert seen >= 2
+    return dest
+
+
+def test_bag_contents_that_pass_the_crc_but_are_wrong_are_refused_with_the_reason(
+        imported_bag, capsys, tmp_path):
+    from rclpy.serialization import deserialize_message, serialize_message
+    from std_msgs.msg import Float64MultiArray
+
+    garbage = rewritten_copy(imported_bag, tmp_path / 'garbage', lambda m: b'\x00\x01\x00')
+    code, _, err = analyze_json(capsys, garbage)
+    assert code == 1, err
+    assert 'on /camera/markers at log time' in err and 'cannot be decoded as' in err
+
+    def short_block(message):
+        msg = deserialize_message(message.data, Float64MultiArray)
+        msg.data = list(msg.data)[:len(msg.data) // 2]          # the layout still says all
+        return serialize_message(msg)
+    short = rewritten_copy(imported_bag, tmp_path / 'short', short_block)
+    code, _, err = analyze_json(capsys, short)
+    assert code == 1, err
+    assert 'a malformed block on /camera/markers at log time' in err
+    assert 'its layout declares' in err
+
+
+def test_a_force_block_with_an_impossible_start_time_is_refused():
+    from mantis_rig.recording.force_block import force_block_from_msg, force_block_to_msg
+    msg = force_block_to_msg(1_000_000, 50_000, np.ones(10))
+    msg.data = [float('nan'), *list(msg.data)[1:]]
+    with pytest.raises(ValueError, match='start time nan s'):
+        force_block_from_msg(msg)

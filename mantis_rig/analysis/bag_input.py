@@ -17,7 +17,7 @@ import warnings
 
 import numpy as np
 
-from ..recording import BagReader, TruncatedBagWarning
+from ..recording import BagError, BagReader, TruncatedBagWarning
 from ..recording.force_block import force_block_from_msg
 from ..recording.marker_block import concatenate, marker_block_from_msg
 from .tracking import MarkerTracks, TrackFormatError, load_tracks
@@ -79,11 +79,15 @@ def read_trial_bag(path) -> TrialInput:
     marker_blocks, force_blocks = [], []
     with warnings.catch_warnings():  # damage found while reading lands in reader.problems
         warnings.simplefilter('ignore', TruncatedBagWarning)
-        for topic, _, _, msg in reader.messages([MARKERS_TOPIC, FORCE_TOPIC]):
-            if topic == MARKERS_TOPIC:
-                marker_blocks.append(marker_block_from_msg(msg))
-            else:
-                force_blocks.append(force_block_from_msg(msg))
+        for topic, _, log_time_ns, msg in reader.messages([MARKERS_TOPIC, FORCE_TOPIC]):
+            try:
+                if topic == MARKERS_TOPIC:
+                    marker_blocks.append(marker_block_from_msg(msg))
+                else:
+                    force_blocks.append(force_block_from_msg(msg))
+            except (ValueError, IndexError, OverflowError) as exc:
+                raise BagError(f'{path}: a malformed block on {topic} at log time '
+                               f'{log_time_ns * 1e-9:.6f} s: {exc}') from exc
     problems = list(reader.problems)
     if not marker_blocks:
         has = MARKERS_TOPIC in reader.topics
@@ -93,7 +97,11 @@ def read_trial_bag(path) -> TrialInput:
             f'{path}: no marker frames on {MARKERS_TOPIC} ({why}; topics: '
             f'{sorted(reader.topics)})' + (f'; bag problems: {"; ".join(problems)}'
                                            if problems else ''))
-    frames = concatenate(marker_blocks)
+    try:
+        frames = concatenate(marker_blocks)
+    except (ValueError, IndexError) as exc:
+        raise BagError(f'{path}: the marker blocks on {MARKERS_TOPIC} do not fit together: '
+                       f'{exc}') from exc
     order = np.argsort(frames.time_s, kind='stable')
     time_s = frames.time_s[order]
     conditions = reader.metadata('trial_conditions') or {}

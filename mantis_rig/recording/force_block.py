@@ -53,5 +53,13 @@ def force_block_from_msg(msg):
             or msg.layout.dim[0].label != FORCE_LABEL:
         raise ValueError('not a force block (expected data_offset 2 and dim[0] force_n)')
     data = np.asarray(msg.data, dtype=np.float64)
-    return ForceBlock(t0_ns=round(data[0] * _NS_PER_S), period_ns=round(data[1] * _NS_PER_S),
-                      forces_n=data[HEADER_ELEMENTS:HEADER_ELEMENTS + msg.layout.dim[0].size])
+    size = msg.layout.dim[0].size
+    if data.size < HEADER_ELEMENTS + size:
+        raise ValueError(f'force block holds {max(data.size - HEADER_ELEMENTS, 0)} samples, its '
+                         f'layout declares {size}')
+    t0_s, period_s = float(data[0]), float(data[1])
+    if not (np.isfinite(t0_s) and t0_s >= 0 and np.isfinite(period_s) and period_s > 0):
+        raise ValueError(f'force block start time {t0_s} s / sample period {period_s} s: '
+                         f'expected a finite time >= 0 and a period > 0')
+    return ForceBlock(t0_ns=round(t0_s * _NS_PER_S), period_ns=round(period_s * _NS_PER_S),
+                      forces_n=data[HEADER_ELEMENTS:HEADER_ELEMENTS + size])

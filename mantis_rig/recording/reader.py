@@ -237,9 +237,15 @@ class BagReader:
 
     def messages(self, topics=None):
         """Iterate :class:`BagMessage` (topic, type_name, log_time_ns, message) by log time."""
-        for channel, schema, message in self.raw_messages(topics):
-            type_name = schema.name
-            msg = deserialize_message(message.data, message_class(type_name))
+        for index, (channel, schema, message) in enumerate(self.raw_messages(topics)):
+            type_name = schema.name if schema is not None else '(no schema)'
+            try:
+                msg = deserialize_message(message.data, message_class(type_name))
+            except Exception as exc:  # noqa: BLE001 - rclpy's decode errors share no base class
+                raise BagError(
+                    f'{self.path}: message {index} on {channel.topic} at log time '
+                    f'{message.log_time * 1e-9:.6f} s cannot be decoded as {type_name}: '
+                    f'{type(exc).__name__}: {exc}') from exc
             yield BagMessage(channel.topic, type_name, message.log_time, msg)
 
     def __iter__(self):
