@@ -330,18 +330,18 @@ def test_given_condition_out_of_range_is_refused(capsys, tmp_path, option, value
     assert code == 2 and f'{option}: {why}' in err and not out.exists()
 
 
-def rewritten_copy(bag, dest, replace):
+def rewritten_copy(bag, dest, replace=lambda message: message.data, conditions=None):
     """A copy of ``bag`` with the second message on /camera/markers replaced by
-    ``replace(message)`` (bytes, CDR): contents that pass every CRC but are wrong."""
+    ``replace(message)`` (bytes, CDR) and its trial conditions updated with ``conditions``:
+    contents that pass every CRC but are wrong."""
     from mantis_rig.recording import BagReader, BagWriter
     reader = BagReader(bag)
     seen = 0
     with BagWriter(dest, sync_period_s=0) as out:
         for topic, info in reader.topics.items():
             out.add_topic(topic, info.type_name)
-        for name in ('trial_conditions',):
-            if reader.metadata(name):
-                out.add_metadata(name, reader.metadata(name))
+        out.add_metadata('trial_conditions',
+                         {**(reader.metadata('trial_conditions') or {}), **(conditions or {})})
         for channel, _, message in reader.raw_messages():
             data = message.data
             if channel.topic == '/camera/markers':
@@ -380,3 +380,16 @@ def test_a_force_block_with_an_impossible_start_time_is_refused():
     msg.data = [float('nan'), *list(msg.data)[1:]]
     with pytest.raises(ValueError, match='start time nan s'):
         force_block_from_msg(msg)
+
+
+@pytest.mark.parametrize('conditions, why', [
+    ({'contact_angle_deg': '-90'}, 'contact_angle_deg = -90.0 deg is outside [-45.0, 45.0] deg'),
+    ({'d_t_mm': '-5'}, 'd_t_mm = -5.0 mm is outside [1.0, 100.0] mm'),
+    ({'d_t_mm': 'wide'}, "d_t_mm = 'wide' is not a finite number"),
+])
+def test_a_bags_trial_conditions_are_checked_like_the_command_lines(imported_bag, capsys,
+                                                                     tmp_path, conditions, why):
+    bag = rewritten_copy(imported_bag, tmp_path / 'conditions', conditions=conditions)
+    code, _, err = analyze_json(capsys, bag)
+    assert code == 1, err
+    assert f'trial conditions: {why}' in err

@@ -70,7 +70,10 @@ def analyse_trial(trial, given: dict | None = None) -> tuple:
     warning."""
     tracks = trial.tracks
     last = float(tracks.time_s[-1])
-    params, sources = params_for_trial(trial.conditions, given=given or {})
+    try:
+        params, sources = params_for_trial(trial.conditions, given=given or {})
+    except ValueError as exc:          # ConditionError: a condition out of range
+        raise TrialRefused(str(exc)) from exc
     if trial.force_N is not None:
         params.tendon_force_N, params.tendon_force_time_s = trial.force_N, trial.force_time_s
     try:

@@ -24,6 +24,23 @@ def _number(conditions: dict, key: str) -> float | None:
     return value if math.isfinite(value) else None
 
 
+def _check_ranges(values: dict, source: str) -> None:
+    """The conditions the analysis uses, against the ranges the command line and the
+    supervisor enforce (one source: nodes.trial_conditions); ConditionError names the value."""
+    from mantis_rig.nodes.trial_conditions import ConditionError, check_value
+    for key in ('d_t_mm', 'contact_angle_deg'):
+        raw = values.get(key)
+        if raw is None or raw == '':
+            continue
+        value = _number(values, key)
+        if value is None:
+            raise ConditionError(f'{source}: {key} = {raw!r} is not a finite number')
+        try:
+            check_value(key, value)
+        except ConditionError as exc:
+            raise ConditionError(f'{source}: {exc}') from None
+
+
 def scene_of(conditions: dict):
     """The mantis_sim scene the trial names, or None (no scene, or one mantis_sim lacks)."""
     name = str(conditions.get('scene') or '')
@@ -65,6 +82,7 @@ def params_for_trial(conditions: dict, params: AnalysisParams | None = None,
                 com2_mm=(scene.arm.com_x_mm, scene.arm.com_y_mm)))
         notes.append(f'geometry, spring and inertia of scene {scene.name!r}')
     for source, values in (('trial conditions', conditions), ('given', given or {})):
+        _check_ranges(values, source)
         d_t = _number(values, 'd_t_mm')
         if d_t is not None:
             params = replace(params, d_t_mm=d_t)
