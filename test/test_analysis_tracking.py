@@ -155,3 +155,30 @@ def test_overcentering_matches_authors(analysis):
     place of the design's 2.201 s, θ3 including the authors' 3.2° contact angle 1.77 s (the
     zero moves ~4 ms per mrad of θ1 and ~7 ms per mrad of θ3)."""
     assert abs(analysis.summary()['overcentering_s'] - 2.1265) < 0.02
+
+
+def arm_lost(tracks, first, last):
+    """A copy of the tracks with every arm marker lost (NaN) over frames first..last-1."""
+    import copy
+    lost = copy.deepcopy(tracks)
+    for name in lost.arm_markers:
+        lost.markers_mm[name][first:last] = np.nan
+    return lost
+
+
+@pytest.mark.parametrize('around', [(-3, 3), (-10, 10), (-40, -20)],
+                         ids=['at the peak', 'over the peak', 'before the peak'])
+def test_markers_lost_inside_the_strike_are_refused_not_guessed(analysis, around):
+    from mantis_rig.analysis.report import StrikeLost
+    tracks = load_tracks(DATA)
+    peak = int(np.searchsorted(tracks.time_s, analysis.phases.peak_tip_speed_s))
+    with pytest.raises(StrikeLost, match='the markers were lost inside the strike'):
+        analyze_tracks(arm_lost(tracks, peak + around[0], peak + around[1]))
+
+
+def test_tracking_that_ends_in_the_strike_is_counted(analysis):
+    tracks = load_tracks(DATA)
+    peak = int(np.searchsorted(tracks.time_s, analysis.phases.peak_tip_speed_s))
+    ended = analyze_tracks(arm_lost(tracks, peak + 2, tracks.n_frames))
+    assert ended.summary()['lost_frames_in_strike'] > 0
+    assert analysis.summary()['lost_frames_in_strike'] == 0

@@ -82,13 +82,17 @@ def analyse_trial(trial, given: dict | None = None) -> tuple:
         raise TrialRefused(
             f'not enough data before the damage: the data end at t = {last:.4f} s: {exc}'
             if trial.truncated else f'analysis failed: {exc}') from exc
+    notes = []
+    if analysis.lost_frames_in_strike:
+        notes.append(f'tracking ends {analysis.lost_frames_in_strike} frame(s) into the strike '
+                     f'(markers lost from then on): its end is extrapolated')
     if strike_recorded(analysis):
-        return analysis, [], sources
+        return analysis, notes, sources
     why = (f'the data end at t = {last:.4f} s, before the strike is over (the tip speed '
            f'never falls below {STRIKE_END_SHARE:.0%} of its peak after it)')
     if trial.truncated:
         raise TrialRefused(f'not enough data before the damage: {why}')
-    return analysis, [f'{why}; phase times and peaks are not reliable'], sources
+    return analysis, notes + [f'{why}; phase times and peaks are not reliable'], sources
 
 
 # ------------------------------------------------------------------------------ the trials

@@ -97,6 +97,7 @@ class TrialAnalysis:
     linkage: LinkageFit | None = None
     body_pivot_mm: np.ndarray | None = None     # in AnalysisParams.pivot_frame
     overcentering_method: str = 'tendon geometry'   # or 'trajectory knee'
+    lost_frames_in_strike: int = 0                  # gaps (lost markers) in phase IV
 
     @property
     def arm_ke_share_at_peak(self) -> float:
@@ -122,6 +123,7 @@ class TrialAnalysis:
             'contact_angle_deg': math.degrees(self.contact_angle_rad),
             'body_pivot_mm': pivot,
             'L1_mm': self.L1_mm,
+            'lost_frames_in_strike': self.lost_frames_in_strike,
         }
 
 
@@ -139,8 +141,42 @@ def analyze_tracks(tracks: MarkerTracks, params: AnalysisParams | None = None) -
     result.linkage = linkage
     result.body_pivot_mm = pivot_in_frame(linkage.body_pivot_mm, tracks.handedness,
                                           params.pivot_frame)
+    result.lost_frames_in_strike = check_strike_tracked(result, tracks.time_s)
     check_plausible(result, tracks)
     return result
+
+
+class StrikeLost(ValueError):
+    """The markers were lost where the peak tip speed is measured: no number is given."""
+
+
+#: Frames either side of the peak that its fit needs (the local quintic's minimum half-width).
+PEAK_FRAMES_NEEDED = 6
+
+
+def check_strike_tracked(result: TrialAnalysis, frame_times_s: np.ndarray) -> int:
+    """The number of frames lost (gaps: too few markers tracked on the body or the arm) from
+    overcentering (phase III) to PEAK_FRAMES_NEEDED frames after the peak. A gap there after which
+    tracking resumes is a hole in the strike: a fit across it would be a guess (the true peak
+    may lie inside it), so :class:`StrikeLost` names the frames. Tracking that ends there for
+    good is reported by the count (the strike's end is extrapolated)."""
+    lost_s = np.setdiff1d(np.asarray(frame_times_s, float), result.time_s)
+    if lost_s.size == 0:
+        return 0
+    frame_s = float(np.median(np.diff(frame_times_s)))
+    p = result.phases
+    # from overcentering on: a hole that hides the strike moves the phases it defines
+    start = min(p.overcentering_s, p.max_contraction_s) - PEAK_FRAMES_NEEDED * frame_s
+    end = p.peak_tip_speed_s + (PEAK_FRAMES_NEEDED + 0.5) * frame_s
+    in_strike = lost_s[(lost_s >= start) & (lost_s <= end)]
+    if in_strike.size and result.time_s[-1] > in_strike[-1]:
+        resumed = float(result.time_s[np.searchsorted(result.time_s, in_strike[-1])])
+        raise StrikeLost(
+            f'the markers were lost inside the strike: {in_strike.size} frame(s) between '
+            f't = {in_strike[0]:.5f} and {in_strike[-1]:.5f} s are gaps (too few markers '
+            f'tracked on the body or the arm; tracking resumes at {resumed:.5f} s), so the '
+            f'peak tip speed cannot be measured')
+    return int(in_strike.size)
 
 
 class ImplausibleResult(ValueError):
