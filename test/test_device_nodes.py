@@ -4,6 +4,7 @@ process, on a private rclpy context (test/conftest.py keeps DDS on loopback and 
 test a domain of its own)."""
 from __future__ import annotations
 
+import math
 import os
 import threading
 import time
@@ -196,9 +197,13 @@ def trial():
         rig.wait_for(lambda: rig.messages('/camera/markers'), 'marker frames')
         rig.wait_for(lambda: rig.messages('/stage/joint_state')[-1].velocity[0] == 0.0,
                      'the stage to report a stop')
-        rig.wait_for(lambda: any(kv.key == 'phase' and kv.value == 'IV'     # 1 Hz, wall
-                                 for s in rig.diagnostics('sim_world_node') for kv in s.values),
-                     'sim_world_node to report phase IV on /diagnostics')
+        # 1 Hz of wall time: a report in phase IV can come before the peak is found, so wait
+        # for one that has both (the test below reads the last report)
+        rig.wait_for(lambda: any(
+            values.get('phase') == 'IV' and math.isfinite(float(values.get('peak_time_s', 'nan')))
+            for values in ({kv.key: kv.value for kv in s.values}
+                           for s in rig.diagnostics('sim_world_node'))),
+            'sim_world_node to report phase IV and the peak on /diagnostics')
         time.sleep(0.5)                      # the rest of the marker blocks, a few more samples
     finally:
         rig.close()

@@ -252,6 +252,9 @@ class TrialSequence:
     def _bring_up(self) -> None:
         if self.state != 'configuring':
             self._set_state('configuring')
+        # Simulated: the rig's clock is the world's (/clock); before its first tick it reads 0
+        # and nothing logged or timed would be on the world's time.
+        self._wait(lambda: self.rig.now_s() > 0.0, 'the rig clock (simulated: /clock)')
         for node in DEVICE_NODES:
             label = self._device_state(node)
             steps = {'unconfigured': ('configure', 'activate'), 'inactive': ('activate',),
