@@ -1,0 +1,204 @@
+"""Fuzz suite (issue 16): damaged bags, bag metadata and scenes are read or refused with the
+reader's own error, never another exception, never a hang.
+
+Property-based with hypothesis. The CI profile (default) is small and deterministic; the long
+profile runs by one command:
+
+    MANTIS_FUZZ_PROFILE=long .venv/bin/python -m pytest -q test/test_fuzz.py
+
+Each case writes the damaged copy to a fresh directory; the source files are never touched.
+Damaged tracking files are covered by test_tracker_export.py (seeded damaged copies of real
+exports).
+"""
+import os
+from pathlib import Path
+import shutil
+import struct
+import tempfile
+import warnings
+import zlib
+
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from mcap.reader import make_reader
+import pytest
+import yaml
+
+from mantis_rig.analysis.bag_input import read_trial_bag
+from mantis_rig.analysis.tracking import TrackFormatError
+from mantis_rig.recording import BagError, BagReader, BagWriter, TruncatedBagWarning
+from mantis_rig.replay.synthetic import TOPICS, synthetic_messages
+from mantis_sim.parameters import ParameterError
+from mantis_sim.scene import SceneError, load_scene_file
+
+REPO = Path(__file__).resolve().parents[1]
+settings.register_profile('ci', max_examples=60, derandomize=True, deadline=None,
+                          suppress_health_check=[HealthCheck.too_slow])
+settings.register_profile('long', max_examples=3000, deadline=None,
+                          suppress_health_check=[HealthCheck.too_slow])
+PROFILE = os.environ.get('MANTIS_FUZZ_PROFILE', 'ci')
+
+pytestmark = pytest.mark.timeout(600)
+
+
+def fuzz(test):
+    return settings.get_profile(PROFILE)(test)
+
+
+# --------------------------------------------------------------------------- bags
+@pytest.fixture(scope='module')
+def source_bag(tmp_path_factory):
+    """A small trial bag, uncompressed (so that records can be edited in place), in chunks
+    of 4 kB."""
+    path = tmp_path_factory.mktemp('fuzz') / 'trial'
+    with BagWriter(path, sync_period_s=0, compression='none', chunk_size_bytes=4096) as bag:
+        for topic, (type_name, qos) in TOPICS.items():
+            bag.add_topic(topic, type_name, qos)
+        bag.add_metadata('trial_conditions', {'medium': 'air', 'd_t_mm': '23.0'})
+        for topic, msg, t_ns in synthetic_messages(duration_s=0.3, marker_blocks=2,
+                                                   frames_per_block=50):
+            bag.write(topic, msg, t_ns)
+        bag.close(trial_outcome={'result': 'completed'})
+    return path
+
+
+def read_everything(bag: Path) -> None:
+    """What analyze, replay and recover do with a bag before any analysis: open it, decode
+    every message, read the trial's marker and force blocks. Only the readers' own errors may
+    come out."""
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore', TruncatedBagWarning)
+        try:
+            reader = BagReader(bag, warn=False)
+            for _ in reader.messages():
+                pass
+            read_trial_bag(bag)
+        except (BagError, TrackFormatError):
+            pass
+
+
+def damaged_copy(source: Path, edit) -> Path:
+    """A copy of the bag directory in a new temp dir, its .mcap bytes passed through edit."""
+    destination = Path(tempfile.mkdtemp(prefix='fuzz_bag_')) / source.name
+    shutil.copytree(source, destination)
+    mcap = next(destination.glob('*.mcap'))
+    mcap.write_bytes(edit(bytearray(mcap.read_bytes())))
+    return destination
+
+
+def chunk_records(data: bytes):
+    """(offset, length) of each chunk's records in an uncompressed MCAP file, and the offset
+    of the chunk's CRC field."""
+    import io
+    summary = make_reader(io.BytesIO(bytes(data))).get_summary()
+    spans = []
+    for index in summary.chunk_indexes:
+        start = index.chunk_start_offset + 1 + 8          # opcode, record length
+        crc_at = start + 8 + 8 + 8                        # start, end times, uncompressed size
+        (compression_length,) = struct.unpack_from('<I', data, crc_at + 4)
+        records_length_at = crc_at + 4 + 4 + compression_length
+        (records_length,) = struct.unpack_from('<Q', data, records_length_at)
+        spans.append((records_length_at + 8, records_length, crc_at))
+    return spans
+
+
+@fuzz
+@given(cut=st.floats(0.0, 1.0))
+def test_a_bag_cut_anywhere_is_read_up_to_the_cut_or_refused(source_bag, cut):
+    bag = damaged_copy(source_bag, lambda data: data[:int(len(data) * cut)])
+    (bag / 'metadata.yaml').unlink()
+    read_everything(bag)
+    shutil.rmtree(bag.parent)
+
+
+@fuzz
+@given(edits=st.lists(st.tuples(st.floats(0.0, 1.0), st.integers(0, 255)), min_size=1,
+                      max_size=8))
+def test_a_bag_with_changed_bytes_is_read_or_refused(source_bag, edits):
+    def edit(data):
+        for where, value in edits:
+            data[min(int(len(data) * where), len(data) - 1)] = value
+        return data
+    bag = damaged_copy(source_bag, edit)
+    read_everything(bag)
+    shutil.rmtree(bag.parent)
+
+
+@fuzz
+@given(chunk=st.integers(0, 10_000), where=st.floats(0.0, 1.0), value=st.integers(0, 255),
+       span=st.integers(1, 64))
+def test_records_changed_behind_a_valid_crc_are_read_or_refused(source_bag, chunk, where,
+                                                                value, span):
+    """The damage the CRCs do not catch: bytes inside a chunk changed, the chunk's CRC
+    recomputed, so the decoder meets wrong lengths, opcodes and message payloads."""
+    def edit(data):
+        spans = chunk_records(data)
+        start, length, crc_at = spans[chunk % len(spans)]
+        first = start + int(where * (length - 1))
+        data[first:min(first + span, start + length)] = bytes([value]) * min(
+            span, start + length - first)
+        struct.pack_into('<I', data, crc_at, zlib.crc32(bytes(data[start:start + length])))
+        return data
+    bag = damaged_copy(source_bag, edit)
+    read_everything(bag)
+    shutil.rmtree(bag.parent)
+
+
+YAML_VALUES = st.one_of(st.none(), st.booleans(), st.integers(), st.floats(),
+                        st.text(max_size=20), st.lists(st.one_of(st.none(), st.text(max_size=8)),
+                                                       max_size=3),
+                        st.dictionaries(st.text(max_size=5), st.integers(), max_size=2))
+METADATA_KEYS = ('version', 'storage_identifier', 'relative_file_paths', 'duration',
+                 'starting_time', 'message_count', 'topics_with_message_count', 'files',
+                 'compression_format', 'custom_data')
+
+
+@fuzz
+@given(key=st.sampled_from(METADATA_KEYS), value=YAML_VALUES)
+def test_a_bags_metadata_yaml_with_any_field_changed_is_read_or_refused(source_bag, key,
+                                                                       value):
+    bag = damaged_copy(source_bag, lambda data: data)
+    path = bag / 'metadata.yaml'
+    document = yaml.safe_load(path.read_text())
+    document['rosbag2_bagfile_information'][key] = value
+    path.write_text(yaml.safe_dump(document))
+    read_everything(bag)
+    shutil.rmtree(bag.parent)
+
+
+# --------------------------------------------------------------------------- scenes
+SCENE = yaml.safe_load((REPO / 'config' / 'scenes' / 'air_23mm_rig.yaml').read_text())
+SCENE_FIELDS = [(section, key) for section, values in SCENE.items() if isinstance(values, dict)
+                for key in values] + [(key, None) for key in SCENE]
+SCENE_VALUES = st.one_of(st.none(), st.booleans(), st.integers(),
+                         st.integers(min_value=10 ** 300, max_value=10 ** 400),
+                         st.floats(allow_nan=True, allow_infinity=True),
+                         st.text(max_size=12), st.lists(st.integers(), max_size=3),
+                         st.dictionaries(st.text(max_size=5), st.floats(), max_size=2))
+
+
+@fuzz
+@given(field=st.sampled_from(SCENE_FIELDS), value=SCENE_VALUES)
+def test_a_scene_with_any_field_changed_loads_or_is_refused(tmp_path_factory, field, value):
+    import copy
+    data = copy.deepcopy(SCENE)
+    section, key = field
+    if key is None:
+        data[section] = value
+    else:
+        data[section][key] = value
+    path = tmp_path_factory.mktemp('scene') / 'fuzzed.yaml'
+    path.write_text(yaml.safe_dump(data))
+    try:
+        load_scene_file(path)
+    except (SceneError, ParameterError):
+        pass
+
+
+@fuzz
+@given(data=st.binary(max_size=400))
+def test_random_bytes_as_a_scene_are_refused(tmp_path_factory, data):
+    path = tmp_path_factory.mktemp('scene') / 'bytes.yaml'
+    path.write_bytes(data)
+    with pytest.raises((SceneError, ParameterError)):
+        load_scene_file(path)
