@@ -163,13 +163,12 @@ def test_corrupted_chunk_is_reported_and_the_data_before_it_analysed(imported_ba
     assert 40_000 < report['input']['frames'] < N_FRAMES
 
 
-def test_tendon_force_in_bag_gives_tendon_work(capsys, tmp_path, csv_analysis):
-    tracks = load_tracks(DATA)
-    path = tmp_path / 'with_force'
+def bag_with_force(path, tracks, newtons_scale=1.0):
+    """A bag of the tracks' marker frames and a force stream of about 9 N x newtons_scale."""
     t_ns = np.round(tracks.time_s * 1e9).astype(np.int64)
     period_ns, block = 50_000, 1000
     force_t = np.arange(0, tracks.time_s[-1] + 0.05, period_ns / 1e9)
-    force = 9.0 + 0.5 * np.sin(force_t)
+    force = (9.0 + 0.5 * np.sin(force_t)) * newtons_scale
     with BagWriter(path, sync_period_s=0) as bag:
         frames = MarkerFrames(tracks.time_s, {n: xy / 1e3 for n, xy in tracks.markers_mm.items()})
         for i, msg in enumerate(marker_blocks_to_msgs(frames)):
@@ -178,6 +177,19 @@ def test_tendon_force_in_bag_gives_tendon_work(capsys, tmp_path, csv_analysis):
             bag.write('/loadcell/force_block', force_block_to_msg(
                 start * period_ns, period_ns, force[start:start + block]),
                 (start + block) * period_ns)
+    return force
+
+
+def test_an_impossible_tendon_work_is_refused(capsys, tmp_path):
+    bag_with_force(tmp_path / 'huge_force', load_tracks(DATA), newtons_scale=1e11)
+    code, _, err = analyze_json(capsys, tmp_path / 'huge_force')
+    assert code == 1
+    assert 'tendon work' in err and "beyond the robot's 300 mJ" in err
+
+
+def test_tendon_force_in_bag_gives_tendon_work(capsys, tmp_path, csv_analysis):
+    path = tmp_path / 'with_force'
+    force = bag_with_force(path, load_tracks(DATA))
     trial = read_trial_bag(path)
     assert trial.force_N is not None and len(trial.force_N) == len(force)
     code, report, _ = analyze_json(capsys, path)

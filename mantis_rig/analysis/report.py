@@ -187,6 +187,7 @@ class ImplausibleResult(ValueError):
 L1_RANGE_MM = (15.0, 25.0)
 SPRING_ENERGY_RANGE_MJ = (0.0, 300.0)
 TIP_SPEED_RANGE_MPS = (0.0, 60.0)
+TENDON_WORK_LIMIT_MJ = 300.0          # |work| of the tendon over the trial: the spring's scale
 
 
 def check_plausible(result: TrialAnalysis, tracks: MarkerTracks | None = None) -> None:
@@ -207,6 +208,12 @@ def check_plausible(result: TrialAnalysis, tracks: MarkerTracks | None = None) -
         raise ImplausibleResult(
             f'peak tip speed {v:.1f} m/s is outside the robot\'s '
             f'{TIP_SPEED_RANGE_MPS[0]:g}-{TIP_SPEED_RANGE_MPS[1]:g} m/s')
+    if result.tendon_work_mJ is not None:
+        work = float(np.nanmax(np.abs(result.tendon_work_mJ)))
+        if not (math.isfinite(work) and work <= TENDON_WORK_LIMIT_MJ):
+            raise ImplausibleResult(
+                f'tendon work {work:.4g} mJ is beyond the robot\'s {TENDON_WORK_LIMIT_MJ:g} mJ: '
+                f'the recorded force is not the tendon\'s (load-cell scale or units)')
     starts = [(k, x) for k, x in s['phase_start_s'].items() if math.isfinite(x)]
     starts.append(('peak tip speed', s['peak_tip_speed_s']))
     for (k0, t0), (k1, t1) in zip(starts, starts[1:]):
