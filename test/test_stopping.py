@@ -237,7 +237,9 @@ def test_a_full_disk_mid_pull_stops_the_stage_and_keeps_what_was_written(tmp_pat
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
         monkeypatch.setattr(writer_module._AppendOnlyFile, 'write', disk_full)
         final = client.wait_for_end(60.0)
-        reason = stack.node('supervisor_node').last_abort_reason
+        sequence = stack.node('supervisor_node').sequence
+        assert sequence.finished.wait(30.0)     # 'aborted' is published before the log closes
+        reason = sequence.outcome['reason']
         world = stack.node('sim_world_node').world
         deadline = time.monotonic() + 10.0
         while world.stage_velocity_m_per_s() != 0.0 and time.monotonic() < deadline:
