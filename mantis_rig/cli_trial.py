@@ -150,7 +150,7 @@ def run_bringup(args) -> int:
 
 def _trial(config, args, signals) -> int:
     from .nodes.bringup import Stack, StackError
-    from .nodes.stopping import StopRequested
+    from .nodes.stopping import StopRequested, say
     from .nodes.trial_client import TrialClient
     from .trial_summary import format_summary, summarize
 
@@ -177,10 +177,10 @@ def _trial(config, args, signals) -> int:
         client.destroy_node()
     if signals.first is not None:
         where = f'log closed: {run.bag}' if run.bag else 'no trial had started'
-        print(f'mantis trial: {signals.first.reason}: stage stopped; {where}', file=sys.stderr)
+        say(f'mantis trial: {signals.first.reason}: stage stopped; {where}')
         return signals.first.exit_status
     if run.error:
-        print(f'mantis trial: {run.error}', file=sys.stderr)
+        say(f'mantis trial: {run.error}')
         return 1
     print(format_summary(summarize(run.bag), with_path=False))
     return 0 if run.final == 'done' else 1
@@ -241,7 +241,7 @@ def _wait_closed(bag: Path, timeout_s: float, failed=lambda: False) -> bool:
 
 def _bringup(config, args, signals) -> int:
     from .nodes.bringup import Stack
-    from .nodes.stopping import StopRequested
+    from .nodes.stopping import StopRequested, say
 
     stack = Stack(config, log_dir=args.log_dir)
     signals.emergency_stop = stack.emergency_stop
@@ -266,8 +266,7 @@ def _bringup(config, args, signals) -> int:
         reason = signals.first.reason if signals.first else 'a node process ended'
         stack.stop(reason=reason, signum=_signum(signals))
     if signals.first is not None:
-        print(f'mantis bringup: {signals.first.reason}: stage stopped, nodes ended',
-              file=sys.stderr)
+        say(f'mantis bringup: {signals.first.reason}: stage stopped, nodes ended')
         return signals.first.exit_status
     return status
 

@@ -82,9 +82,15 @@ class StopSignals:
         except Exception as exc:       # noqa: BLE001 - exiting at once is what was asked
             stopped = f'stopping the stage failed: {exc}'
         name = SIGNAL_NAMES.get(signum, str(signum))
-        print(f'{self.program}: second {name} during shutdown: {stopped}; exiting now',
-              file=sys.stderr, flush=True)
+        say(f'{self.program}: second {name} during shutdown: {stopped}; exiting now')
         os._exit(128 + signum)
+
+
+def say(line: str) -> None:
+    """One line on stderr in one write: the nodes' loggers write to the same descriptor from
+    other threads, and print() writes the text and its newline apart."""
+    sys.stderr.flush()
+    os.write(sys.stderr.fileno(), (line + '\n').encode('utf-8', 'replace'))
 
 
 def watch_parent(parent_pid: int) -> threading.Thread:
@@ -100,4 +106,4 @@ def watch_parent(parent_pid: int) -> threading.Thread:
     return thread
 
 
-__all__ = ['StopRequested', 'StopSignals', 'watch_parent']
+__all__ = ['StopRequested', 'StopSignals', 'say', 'watch_parent']
