@@ -16,7 +16,6 @@ from .nodes.trial_conditions import (
 )
 
 USAGE_ERROR = 2
-LOG_WRITE_FAILED = 'log write failed'     # the supervisor's reason (supervisor_node)
 PROCESSES = ('single', 'multi')
 
 
@@ -198,6 +197,10 @@ class _TrialRun:
 
     def follow(self, client, stack, timeout_s: float) -> None:
         from .nodes.bringup import StackError
+        from .nodes.supervisor_node import LOG_WRITE_FAILED
+
+        def log_failed() -> bool:
+            return client.reason.startswith(LOG_WRITE_FAILED)
 
         if not client.wait_for_supervisor(60.0, stack.check_processes):
             raise StackError('the supervisor did not come up within 60 s')
@@ -210,9 +213,8 @@ class _TrialRun:
         if self.final is None:
             client.call('abort', timeout_s=5.0)
             raise StackError(f'no end of trial within {timeout_s} s; aborted')
-        if not _wait_closed(self.bag, 30.0, failed=lambda: client.reason.startswith(
-                LOG_WRITE_FAILED)):
-            if client.reason.startswith(LOG_WRITE_FAILED):
+        if not _wait_closed(self.bag, 30.0, failed=log_failed):
+            if log_failed():
                 raise StackError(client.reason)
             raise StackError(f'the trial ended ({self.final}) but its log {self.bag} was not '
                              f'closed within 30 s')

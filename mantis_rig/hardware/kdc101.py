@@ -410,14 +410,12 @@ class Kdc101Stage(Stage):
                                   f'open{cause}')
             try:
                 self._port.write(data)
-            except serial.SerialTimeoutException as exc:
-                if self._bytes_still_queued() == 0:
+            except (serial.SerialException, OSError) as exc:
+                if isinstance(exc, serial.SerialTimeoutException) \
+                        and self._bytes_still_queued() == 0:
                     # pyserial checks its write timeout after the bytes are handed over: a
                     # process stalled for longer (a long GC pause) is not a stuck line.
                     return
-                raise DeviceError(f'KDC101 port {self.port_path} failed while sending '
-                                  f'{name}: {exc}') from exc
-            except (serial.SerialException, OSError) as exc:
                 raise DeviceError(f'KDC101 port {self.port_path} failed while sending '
                                   f'{name}: {exc}') from exc
 

@@ -56,10 +56,6 @@ class StopSignals:
             signal.signal(signum, self._on_signal)
         return self
 
-    @property
-    def stopping(self) -> bool:
-        return self.first is not None
-
     def shield(self) -> None:
         """The orderly stop is under way: from now on a first signal is only noted (see
         `first`), not raised into it; a second one still exits at once."""

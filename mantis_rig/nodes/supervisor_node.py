@@ -37,6 +37,7 @@ from .trial_sequence import DEVICE_NODES, TrialSequence
 
 NODE_NAME = 'supervisor_node'
 STATUS_NAME = 'supervisor_node: trial'
+LOG_WRITE_FAILED = 'log write failed'     # how the abort reason of a failed log begins
 LOG_TAIL_WAIT_S = 2.0
 
 
@@ -181,7 +182,7 @@ class SupervisorNode(Node):
         """The bag cannot be written (disk full, directory removed): stop the stage and end
         the trial; what was synced before stays readable."""
         sequence = self.sequence
-        reason = (f'log write failed at rig time {self.rig.now_s():.3f} s: '
+        reason = (f'{LOG_WRITE_FAILED} at rig time {self.rig.now_s():.3f} s: '
                   f'{failure.cause.strerror or failure.cause}; stage stopped; '
                   f'{failure.durable_messages} messages written before the failure')
         self.get_logger().error(reason)

@@ -347,9 +347,7 @@ class BagWriter:
         period = self._sync_period_s
         while not self._stop.wait(period / 4):
             with self._lock:
-                if self._closed:
-                    return
-                if self.failure is not None:
+                if self._closed or self.failure is not None:
                     return
                 since = self._unsynced_since
                 if since is not None and time.monotonic() - since >= period:
