@@ -21,7 +21,7 @@ NODES = {
     'loadcell_node': 'mantis_rig.nodes.loadcell_node:main',
     'camera_node': 'mantis_rig.nodes.camera_node:main',
     'supervisor_node': 'mantis_rig.nodes.supervisor_node:main',
-    'sim_world_node': 'mantis_rig.nodes.sim_world_node:main',
+    'sim_rig': 'mantis_rig.nodes.sim_rig:main',
     'replay_node': 'mantis_rig.nodes.replay_node:main',
 }
 EXISTING_NODES = [

@@ -8,11 +8,12 @@ Three processes on one local ROS domain, each measured on its own from /proc/<pi
 * the source: ``ni`` (default) = loadcell_node, the DAQ node as it runs on the rig (backend
   ``hardware``, the NI-DAQmx code path), over the test suite's fake of nidaqmx
   (test/fakes_nidaq) paced to deliver samples no faster than the wall clock, as the USB-6363
-  does; ``sim`` = sim_world_node + loadcell_node with the simulated backend; ``synthetic`` = a
+  does; ``sim`` = the simulated rig (mantis_rig.nodes.sim_rig: the world and loadcell_node
+  with the simulated backend, in one process); ``synthetic`` = a
   bare publisher of force blocks standing in for the DAQ node. The DAQ node is configured and
   activated here through its lifecycle services.
-  With ``sim`` the DAQ node's share includes receiving the world's 20 kS/s truth over /sim/*,
-  and the stream runs on simulated time (it slips when the world falls behind);
+  With ``sim`` the DAQ's share includes the world's, and the stream runs on simulated time (it
+  slips when the world falls behind);
   ``synthetic`` paces 20 kS/s on the wall clock.
 * the recorder: a node with mantis_rig.nodes.recorder.Recorder writing every
   /loadcell/force_block (and /loadcell/wrench, /diagnostics) into a BagWriter bag.
@@ -214,7 +215,7 @@ def main(argv=None) -> int:
     work = Path(tempfile.mkdtemp(prefix='bench_throughput_'))
     bag = work / 'bag'
     me = [sys.executable, str(Path(__file__).resolve())]
-    logs = {name: open(work / f'{name}.log', 'wb') for name in ('world', 'daq', 'recorder')}
+    logs = {name: open(work / f'{name}.log', 'wb') for name in ('daq', 'recorder')}
     processes = {}
     try:
         recorder = subprocess.Popen(me + ['--role', 'recorder', '--bag', str(bag),
@@ -223,15 +224,12 @@ def main(argv=None) -> int:
                                     env=os.environ.copy())
         processes['recorder'] = recorder
         if args.source == 'sim':
-            ros = ['--ros-args', '-p', 'use_sim_time:=true', '-p', 'backend:=sim',
+            ros = ['--ros-args', '-p', f'scene:={args.scene}',
                    '-p', f'sample_rate_hz:={args.rate}']
             if args.block_size:
                 ros += ['-p', f'block_size:={args.block_size}']
-            processes['world'] = spawn([sys.executable, '-m', 'mantis_rig.nodes.sim_world_node',
-                                        '--ros-args', '-p', f'scene:={args.scene}',
-                                        '-p', f'force_rate_hz:={args.rate}'], logs['world'])
-            processes['daq'] = spawn([sys.executable, '-m', 'mantis_rig.nodes.loadcell_node',
-                                      *ros, '-p', f'scene:={args.scene}'], logs['daq'])
+            processes['daq'] = spawn([sys.executable, '-m', 'mantis_rig.nodes.sim_rig', *ros],
+                                     logs['daq'])
             lifecycle('loadcell_node', (1, 3))           # configure, activate
         elif args.source == 'ni':
             block = ['--block-size', str(args.block_size)] if args.block_size else []
@@ -248,9 +246,7 @@ def main(argv=None) -> int:
         time.sleep(args.duration)
         wall = time.monotonic() - wall0
         after = {name: cpu_seconds(p.pid) for name, p in processes.items()}
-        for name in ('daq', 'world'):
-            if name in processes:
-                processes[name].send_signal(signal.SIGINT)
+        processes['daq'].send_signal(signal.SIGINT)
         time.sleep(1.0)                                      # the last blocks in flight
         recorder.send_signal(signal.SIGTERM)
         counts, _ = recorder.communicate(timeout=60)

@@ -48,7 +48,9 @@ def _stack_arguments(parser) -> None:
                         help='a supervisor parameter (e.g. force_ceiling_n=12, operator_note=...) '
                         'or a scene parameter (e.g. loadcell.noise_N=0.02); repeatable')
     parser.add_argument('--processes', choices=PROCESSES, default='single',
-                        help='single: all nodes in this process; multi: one process per node')
+                        help='single: all nodes in this process; multi: the supervisor in a '
+                        'process and the rig in its own (sim: one sim_rig process; hardware: one '
+                        'per device node)')
     parser.add_argument('--real-time-factor', type=float, default=1.0,
                         help='simulated seconds per wall second (sim backend; default 1; '
                         'simulated time slips when the machine cannot keep up; 0: as fast '

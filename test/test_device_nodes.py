@@ -1,4 +1,4 @@
-"""Device nodes and sim_world_node (issue 4): a simulated pull through the ROS interfaces, and
+"""Device nodes in the simulated rig (issue 4): a simulated pull through the ROS interfaces, and
 the ways the nodes refuse bad input or fail. All nodes share one MultiThreadedExecutor in one
 process, on a private rclpy context (test/conftest.py keeps DDS on loopback and gives each
 test a domain of its own)."""
@@ -28,7 +28,7 @@ from mantis_rig.hardware.world_port import WorldPort
 from mantis_rig.nodes.camera_node import CameraNode
 from mantis_rig.nodes.executors import Spinner
 from mantis_rig.nodes.loadcell_node import LoadcellNode
-from mantis_rig.nodes.sim_world_node import SimWorldNode
+from mantis_rig.nodes.sim_rig import SimRig
 from mantis_rig.nodes.stage_node import StageNode
 from mantis_rig.recording.force_block import force_block_from_msg, force_block_to_msg
 from mantis_rig.recording.marker_block import concatenate, marker_block_from_msg
@@ -74,6 +74,13 @@ class Rig:
         self.nodes.append(node)
         self.executor.add_node(node)
         return node
+
+    def add_sim_rig(self, parameters):
+        """The simulated rig's world and device nodes (backend sim) on this rig's executor."""
+        sim_rig = SimRig(parameters, context=self.context)
+        sim_rig.add_to(self.executor, self.executor)
+        self.nodes.append(sim_rig)
+        return sim_rig
 
     def _recorder(self, topic):
         def record(msg):
@@ -126,8 +133,11 @@ class Rig:
         rclpy.shutdown(context=self.context)
 
 
+SCENE = 'air_23mm_rig'
+
+
 def sim_overrides(**extra):
-    return [Parameter('backend', value='sim'), Parameter('scene', value='air_23mm_rig'),
+    return [Parameter('backend', value='sim'), Parameter('scene', value=SCENE),
             *(Parameter(k, value=v) for k, v in extra.items())]
 
 
@@ -166,13 +176,12 @@ def trial():
     """Pull at 2.33 mm/s through the nodes until the release, trigger the camera, stop."""
     rig = Rig()
     try:
-        rig.add(SimWorldNode(context=rig.context, parameter_overrides=[
-            Parameter('real_time_factor', value=REAL_TIME_FACTOR)]))
-        rig.add(StageNode(context=rig.context, parameter_overrides=sim_overrides()))
-        rig.add(LoadcellNode(context=rig.context, parameter_overrides=sim_overrides(seed=3)))
-        rig.add(CameraNode(context=rig.context, parameter_overrides=sim_overrides(
-            frame_rate_hz=FRAME_RATE_HZ, pre_trigger_s=PRE_TRIGGER_S,
-            post_trigger_s=POST_TRIGGER_S)))
+        rig.add_sim_rig({
+            'sim_world_node': {'real_time_factor': REAL_TIME_FACTOR},
+            'loadcell_node': {'scene': SCENE, 'seed': 3},
+            'stage_node': {'scene': SCENE},
+            'camera_node': {'scene': SCENE, 'frame_rate_hz': FRAME_RATE_HZ,
+                            'pre_trigger_s': PRE_TRIGGER_S, 'post_trigger_s': POST_TRIGGER_S}})
         for name in ('stage_node', 'loadcell_node', 'camera_node'):
             assert rig.transition(name, Transition.TRANSITION_CONFIGURE), name
             assert rig.transition(name, Transition.TRANSITION_ACTIVATE), name
@@ -283,12 +292,10 @@ def test_force_ceiling_stops_the_stage():
     this test is about the load cell's ceiling (the delivery lag itself is issue 11)."""
     rig = Rig()
     try:
-        world = rig.add(SimWorldNode(context=rig.context, parameter_overrides=[
-            Parameter('real_time_factor', value=5.0)]))
-        rig.add(StageNode(context=rig.context,
-                          parameter_overrides=sim_overrides(max_force_age_s=5.0)))
-        rig.add(LoadcellNode(context=rig.context,
-                             parameter_overrides=sim_overrides(force_ceiling_n=13.0)))
+        sim_rig = rig.add_sim_rig({
+            'sim_world_node': {'real_time_factor': 5.0},
+            'stage_node': {'scene': SCENE, 'max_force_age_s': 5.0},
+            'loadcell_node': {'scene': SCENE, 'force_ceiling_n': 13.0}})
         for name in ('stage_node', 'loadcell_node'):
             assert rig.transition(name, Transition.TRANSITION_CONFIGURE), name
             assert rig.transition(name, Transition.TRANSITION_ACTIVATE), name
@@ -296,9 +303,9 @@ def test_force_ceiling_stops_the_stage():
         errors = rig.wait_for(lambda: [s for s in rig.diagnostics('loadcell_node')
                                        if s.level == DiagnosticStatus.ERROR], 'the ceiling')
         assert 'above the ceiling 13.000 N' in errors[0].message
-        rig.wait_for(lambda: world.world.stage_velocity_m_per_s() == 0.0, 'the stage to stop',
+        rig.wait_for(lambda: sim_rig.world.stage_velocity_m_per_s() == 0.0, 'the stage to stop',
                      30.0)
-        assert world.world.events, 'the ceiling tripped before the release'
+        assert sim_rig.world.events, 'the ceiling tripped before the release'
         assert rig.state('stage_node') == 'active'
     finally:
         rig.close()

@@ -167,7 +167,7 @@ def test_a_signal_stops_the_stage_closes_the_log_and_ends_everything(trial, proc
     run = trial(processes)
     run.wait_into_trial()
     children = run.children()
-    assert len(children) == (5 if processes == 'multi' else 0)
+    assert len(children) == (2 if processes == 'multi' else 0)    # the rig, the supervisor
     sent_at = run.signal(signum, group=group)
     status = run.wait()
     check_exit(run, status, sent_at, signum)
@@ -196,15 +196,15 @@ def test_a_node_process_killed_by_its_own_signal_aborts_the_trial(trial):
     run = trial('multi')
     run.wait_into_trial()
     children = run.children()
-    stage = next(pid for pid in children
-                 if 'mantis_rig.nodes.stage_node' in Path(f'/proc/{pid}/cmdline').read_text())
-    os.kill(stage, signal.SIGTERM)
+    rig = next(pid for pid in children
+               if 'mantis_rig.nodes.sim_rig' in Path(f'/proc/{pid}/cmdline').read_text())
+    os.kill(rig, signal.SIGTERM)
     status = run.wait(timeout_s=60.0)
     stderr = '\n'.join(run.stderr)
     assert status == 1, stderr
     assert 'Traceback' not in stderr, stderr
     ours = [line for line in run.stderr if line.startswith('mantis trial: ')]
-    assert len(ours) == 1 and 'stage_node (exit 143)' in ours[0], stderr
+    assert len(ours) == 1 and 'sim_rig (exit 143)' in ours[0], stderr
     reader = BagReader(run.bag)
     assert reader.complete
     assert reader.metadata('trial_outcome')['result'] == 'aborted'

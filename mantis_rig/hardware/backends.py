@@ -1,7 +1,7 @@
 """Build a device for a backend name: 'hardware' (KDC101, NI-DAQmx) or 'sim' (the simulated world).
 
-The simulated devices need a WorldPort (`port`: a LocalWorldPort in one process, a RosWorldPort
-across processes) and, for the sensors, the scene (a mantis_sim Scene or a scene name). The
+The simulated devices need a WorldPort (`port`: a LocalWorldPort, in the simulated rig's process)
+and, for the sensors, the scene (a mantis_sim Scene or a scene name). The
 hardware drivers are imported only when asked for, so the simulated rig runs without pyserial
 or nidaqmx; the simulated ones (scipy: ~2 s) at import, so that a node pays for them when it
 starts rather than inside its configure transition. Devices come back unopened.
@@ -79,7 +79,7 @@ def make_camera_trigger(backend: str, port: Optional[WorldPort] = None, *, scene
 def _world(port: Optional[WorldPort], device: str) -> WorldPort:
     if port is None:
         raise ConfigurationError(f'the simulated {device} needs a WorldPort to the simulated '
-                                 f'world (LocalWorldPort or RosWorldPort)')
+                                 f'world (a LocalWorldPort)')
     return port
 
 

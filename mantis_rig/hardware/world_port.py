@@ -1,9 +1,8 @@
 """How the simulated backends reach the simulated world (mantis_sim.world.World).
 
-The backends (sim_stage, sim_force, sim_camera) only see a WorldPort. In one process a
-LocalWorldPort wraps a World that a WorldRunner thread advances in simulated time; across
-processes the nodes use mantis_rig.nodes.ros_world_port.RosWorldPort, which speaks to
-sim_world_node over the /sim/* topics (docs/ros_interfaces.md). Times are simulated seconds.
+The backends (sim_stage, sim_force, sim_camera) only see a WorldPort: a LocalWorldPort, which
+wraps a World that a WorldRunner thread advances in simulated time, in the same process (the
+simulated rig, mantis_rig.nodes.sim_rig). Times are simulated seconds.
 """
 from __future__ import annotations
 

@@ -2,17 +2,19 @@
 
 ``Stack(StackConfig(...)).start()``:
 
-* ``processes='single'``: sim_world_node (sim backend only), stage_node, loadcell_node,
-  camera_node and supervisor_node constructed here. The simulated devices read the world
-  through a LocalWorldPort on sim_world_node's runner instead of the /sim/* topics. Two
-  executors spin in background threads: a MultiThreadedExecutor for the device nodes (their
-  services block) and a SingleThreadedExecutor for the world, the supervisor and any node added
-  with add_node() (a client), whose callbacks never block (mantis_rig.nodes.executors).
-* ``processes='multi'``: each node is ``python -m mantis_rig.nodes.<name> --ros-args
-  --params-file <stack.yaml>``, with ``use_sim_time`` in sim mode, talking to the world over
-  /sim/*; they inherit this process's environment, hence its ROS domain, each in a process
-  group of its own. stop() signals them (the supervisor first, so that it aborts a trial and
-  closes its log; SIGKILL for any still running after 2.5 s).
+* ``processes='single'``: the rig (the simulated rig, mantis_rig.nodes.sim_rig, or the three
+  device nodes on their hardware backends) and supervisor_node constructed here, on the
+  world's clock in sim mode. Two executors spin in background threads: a
+  MultiThreadedExecutor for the device nodes (their services block) and a
+  SingleThreadedExecutor for the world, the supervisor and any node added with add_node() (a
+  client), whose callbacks never block (mantis_rig.nodes.executors).
+* ``processes='multi'``: the supervisor in one process and the rig in others (sim: one
+  ``sim_rig`` process; hardware: one per device node), each ``python -m mantis_rig.nodes.<name>
+  --ros-args --params-file <stack.yaml>``: they talk over exactly the topics and services of
+  the real rig, the supervisor on ``use_sim_time`` in sim mode. They inherit this process's
+  environment, hence its ROS domain, each in a process group of its own. stop() signals them
+  (the supervisor first, so that it aborts a trial and closes its log; SIGKILL for any still
+  running after 2.5 s).
 
 The device nodes come up unconfigured; the supervisor configures and activates them.
 """
@@ -31,17 +33,13 @@ import time
 from rclpy.parameter import Parameter
 import yaml
 
-from mantis_rig.hardware.local_world import LocalWorldPort
 from mantis_rig.safety_limits import FORCE_CEILING_NAME, FORCE_GUARD_NODES
 
 from .executors import STACK_PARENT_ENV, Spinner, light_executor, threaded_executor
-from .shared_clock import SharedSimClock
+from .sim_rig import DEVICE_CLASSES, DEVICE_THREADS, WORLD_NODE, SimRig, device_class
 
-DEVICE_CLASSES = {'stage_node': 'StageNode', 'loadcell_node': 'LoadcellNode',
-                  'camera_node': 'CameraNode'}
-WORLD_NODE = ('sim_world_node', 'SimWorldNode')
 SUPERVISOR_NODE = ('supervisor_node', 'SupervisorNode')
-EXECUTOR_THREADS = 8
+SIM_RIG_PROCESS = 'sim_rig'
 
 
 @dataclass
@@ -66,9 +64,9 @@ class StackConfig:
         # that reads the parameter unset): [''] means no override to the nodes.
         overrides = list(self.scene_overrides) or ['']
         if self.sim:
-            params[WORLD_NODE[0]] = {'scene': self.scene, 'seed': self.seed,
-                                     'set': list(overrides),
-                                     'real_time_factor': float(self.real_time_factor)}
+            params[WORLD_NODE] = {'scene': self.scene, 'seed': self.seed,
+                                  'set': list(overrides),
+                                  'real_time_factor': float(self.real_time_factor)}
         # one force ceiling for every guard (mantis_rig.safety_limits)
         ceiling = {FORCE_CEILING_NAME: float(self.supervisor[FORCE_CEILING_NAME])} \
             if FORCE_CEILING_NAME in self.supervisor else {}
@@ -77,8 +75,6 @@ class StackConfig:
                             'set': list(overrides), **self.devices.get(name, {})}
             if name in FORCE_GUARD_NODES:
                 params[name].update(ceiling)
-            if self.sim:
-                params[name]['use_sim_time'] = True
         params[SUPERVISOR_NODE[0]] = {'backend': self.backend, 'scene': self.scene,
                                       **self.supervisor}
         if self.sim:
@@ -87,6 +83,15 @@ class StackConfig:
 
     def node_names(self) -> list:
         return list(self.node_parameters())
+
+    def process_names(self) -> list:
+        """The processes of the multi-process layout: the rig's, then the supervisor's."""
+        rig = [SIM_RIG_PROCESS] if self.sim else list(DEVICE_CLASSES)
+        return rig + [SUPERVISOR_NODE[0]]
+
+    @property
+    def stage_process(self) -> str:
+        return SIM_RIG_PROCESS if self.sim else 'stage_node'
 
 
 class StackError(RuntimeError):
@@ -106,11 +111,12 @@ class Stack:
         self.config = config
         self.log_dir = log_dir
         self.nodes = []
+        self.rig: SimRig | None = None
         self.processes: dict[str, subprocess.Popen] = {}
         # the supervisor, the world and clients: callbacks that never block
         self.executor = light_executor()
         # the device nodes: blocking services, backends waiting for the world
-        self.device_executor = threaded_executor(EXECUTOR_THREADS)
+        self.device_executor = threaded_executor(DEVICE_THREADS)
         self._spinners: list[Spinner] = []
         self._params_file: Path | None = None
 
@@ -130,29 +136,24 @@ class Stack:
 
     def _start_nodes(self) -> None:
         params = self.config.node_parameters()
-        port = clock = None
+        supervisor_params = params[SUPERVISOR_NODE[0]]
         try:
-            if WORLD_NODE[0] in params:
-                world = _node_class(*WORLD_NODE)(
-                    node_name=WORLD_NODE[0], parameter_overrides=_overrides(params[WORLD_NODE[0]]))
-                self._add(world, self.executor)
-                # one process: the simulated devices read the world directly, not over /sim/*,
-                # and every node's sim time is set by the world, not by /clock subscriptions
-                port = LocalWorldPort(world.runner)
-                clock = SharedSimClock()
-                world.clock_listeners.append(clock.on_clock)
-                for name in (*DEVICE_CLASSES, SUPERVISOR_NODE[0]):
-                    params[name].pop('use_sim_time', None)
-            for name, class_name in DEVICE_CLASSES.items():
-                kwargs = {'world_port': port, 'sim_clock': clock} if port is not None else {}
-                self._add(_node_class(name, class_name)(
-                    node_name=name, parameter_overrides=_overrides(params[name]), **kwargs),
-                    self.device_executor)
+            if self.config.sim:
+                # the simulated devices read the world directly, and every node's sim time is
+                # set by the world, not by /clock subscriptions
+                supervisor_params.pop('use_sim_time', None)
+                self.rig = SimRig(params)
+                self.nodes.extend(self.rig.nodes)
+                self.rig.add_to(self.executor, self.device_executor)
+            else:
+                for name in DEVICE_CLASSES:
+                    self._add(device_class(name)(
+                        node_name=name, parameter_overrides=_overrides(params[name])),
+                        self.device_executor)
             supervisor = _node_class(*SUPERVISOR_NODE)(
-                node_name=SUPERVISOR_NODE[0],
-                parameter_overrides=_overrides(params[SUPERVISOR_NODE[0]]))
-            if clock is not None:
-                clock.attach(supervisor)
+                node_name=SUPERVISOR_NODE[0], parameter_overrides=_overrides(supervisor_params))
+            if self.rig is not None:
+                self.rig.clock.attach(supervisor)
             self._add(supervisor, self.executor)
         except BaseException:
             self.stop()
@@ -172,7 +173,7 @@ class Stack:
         with os.fdopen(handle, 'w') as f:
             yaml.safe_dump(params, f)
         self._params_file = Path(path)
-        for name in params:
+        for name in self.config.process_names():
             # Each node in a process group of its own: a terminal's Ctrl-C reaches only this
             # process, which stops the nodes in order (stop()); a node whose parent is gone
             # stops itself (executors.run_node).
@@ -224,9 +225,14 @@ class Stack:
         _end_processes(self.processes.values(), signum)
         for spinner in self._spinners:
             spinner.stop()
+        rig_nodes = self.rig.nodes if self.rig is not None else []
         for node in reversed(self.nodes):
-            _release(node)
-            node.destroy_node()
+            if node not in rig_nodes:
+                _release(node)
+                node.destroy_node()
+        if self.rig is not None:
+            self.rig.destroy_node()
+            self.rig = None
         self.nodes = []
         if self._params_file is not None:
             self._params_file.unlink(missing_ok=True)
@@ -238,9 +244,10 @@ class Stack:
         for node in self.nodes:
             if node.get_name() == 'stage_node':
                 node.emergency_stop()
-        stage = self.processes.get('stage_node')
+        first = self.config.stage_process
+        stage = self.processes.get(first)
         ordered = ([stage] if stage is not None else []) + [
-            p for name, p in self.processes.items() if name != 'stage_node']
+            p for name, p in self.processes.items() if name != first]
         for process in ordered:
             if process.poll() is None:
                 process.send_signal(signal.SIGTERM)

@@ -14,8 +14,10 @@ Parameters carry descriptions and ranges (rclpy refuses out-of-range values); th
 check refuses bad values that a range cannot express, and changes to a parameter that is applied
 at configure while the device is configured, each with the reason.
 
-Services that block (homing, tare) and the simulated backends (which wait for messages from
-sim_world_node) need a MultiThreadedExecutor: `executors.run_node` spins one.
+Services that block (homing, tare) and the simulated backends (which wait for the simulated
+world) need a MultiThreadedExecutor: `executors.run_node` spins one. The simulated backends
+exist only inside the simulated rig (mantis_rig.nodes.sim_rig), which gives each device node the
+world and its clock.
 """
 from __future__ import annotations
 
@@ -42,11 +44,9 @@ from rclpy.parameter import Parameter
 
 from mantis_rig.hardware.backends import BACKENDS, check_backend
 from mantis_rig.hardware.interfaces import DeviceError
-from mantis_rig.nodes.ros_world_port import RosWorldPort
 
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 DEFAULT_SCENE = 'air_23mm_rig'
-WORLD_WAIT_S = 10.0
 SUCCESS = TransitionCallbackReturn.SUCCESS
 FAILURE = TransitionCallbackReturn.FAILURE
 
@@ -112,12 +112,10 @@ def time_msg(t_s: float) -> Time:
 class DeviceNode(LifecycleNode):
     DEVICE = 'device'
     PARAMETERS: tuple = ()
-    READS_FORCE = False       # sim: the world's tendon force, not the stage state, over ROS
-
     def __init__(self, node_name: str, *, world_port=None, sim_clock=None, **kwargs):
-        """world_port: a WorldPort for the sim backend (e.g. a LocalWorldPort); by default the
-        node makes a RosWorldPort at configure. sim_clock: a SharedSimClock that sets this
-        node's time (a one-process stack); by default the sim backend follows /clock."""
+        """world_port: the WorldPort of the sim backend (a LocalWorldPort), without which the
+        sim backend cannot be configured; sim_clock: the SharedSimClock that sets this node's
+        time. Both come from the simulated rig (mantis_rig.nodes.sim_rig)."""
         super().__init__(node_name, **kwargs)
         self._sim_clock = sim_clock
         if sim_clock is not None:
@@ -218,8 +216,7 @@ class DeviceNode(LifecycleNode):
         try:
             self.backend_name = check_backend(self.param('backend'))
             if self.sim():
-                self._follow_sim_time()
-                self.port = self._given_port or self._make_port()
+                self.port = self._world_port()
             self.device = self.open_device(self.port)
         except Exception as exc:      # noqa: BLE001 - every reason goes back to the caller
             self._release()
@@ -293,20 +290,13 @@ class DeviceNode(LifecycleNode):
         elif self.state_label == 'inactive':
             self.trigger_cleanup()
 
-    def _follow_sim_time(self) -> None:
-        """The simulated devices live on the world's clock: stamps must be sim time too."""
-        if self._sim_clock is None and not self.get_parameter('use_sim_time').value:
-            self.get_logger().info('backend sim: following /clock (use_sim_time true)')
-            self.set_parameters([Parameter('use_sim_time', value=True)])
-
-    def _make_port(self) -> RosWorldPort:
-        port = RosWorldPort(self, force=self.READS_FORCE, stage=not self.READS_FORCE)
-        try:
-            port.wait_for_world(WORLD_WAIT_S)
-        except Exception:
-            port.close()
-            raise
-        return port
+    def _world_port(self):
+        if self._given_port is None:
+            raise DeviceError(
+                f'the simulated {self.DEVICE} runs inside the simulated rig, which gives it the '
+                f'world: `ros2 run mantis_rig sim_rig` (or `mantis bringup`), not '
+                f'`{self.get_name()}` alone with backend sim')
+        return self._given_port
 
     def _release(self) -> None:
         device, self.device = self.device, None
@@ -315,9 +305,7 @@ class DeviceNode(LifecycleNode):
                 device.close()
             except Exception as exc:  # noqa: BLE001 - releasing must go on
                 self.get_logger().warning(f'closing the {self.DEVICE}: {exc}')
-        port, self.port = self.port, None
-        if port is not None and port is not self._given_port:
-            port.close()
+        self.port = None
 
     def _on_set_parameters(self, params) -> SetParametersResult:
         for param in params:

@@ -131,9 +131,12 @@ def run_node(node_class, args=None, make_executor=None) -> int:
         except (ValueError, InvalidParameterValueException) as exc:
             print(f'{node_class.__name__}: {exc}', file=sys.stderr)
             return USAGE_ERROR
-        executor = make_executor() if make_executor else threaded_executor(NODE_THREADS)
-        executor.add_node(node)
-        executor.spin()
+        if hasattr(node, 'spin'):            # several nodes that spin themselves (sim_rig)
+            node.spin()
+        else:
+            executor = make_executor() if make_executor else threaded_executor(NODE_THREADS)
+            executor.add_node(node)
+            executor.spin()
     except StopRequested as stop:
         status = stop.exit_status
         _call(node, 'emergency_stop')

@@ -39,7 +39,6 @@ def _check_channel(name: str) -> None:
 
 class LoadcellNode(DeviceNode):
     DEVICE = 'load cell'
-    READS_FORCE = True
     PARAMETERS = (
         Param('channel', 'Dev1/ai0', 'hardware: analog input channel', check=_check_channel),
         Param('sample_rate_hz', 20_000.0, 'sample rate, Hz', (1.0, 2e6)),

@@ -2,53 +2,33 @@
 
 A thread advances the mantis_sim World by `step_s` of simulated time per step, paced at
 `real_time_factor` (0: as fast as it can; when a step is late, simulated time slips rather than
-catching up). After each step it publishes, in this order: the true tendon force on the global
-grid k / force_rate_hz for exactly the samples the step added (those in (t_prev, t_new]), the
-stage state stamped with the world's time, the answers to camera requests whose window the world
-has passed, then /clock. Stage velocity commands take effect at the world's current time
-(applied by the runner thread before its next step). Once a wall second, /diagnostics gets
-the status `sim_world_node: world` (keys time_s, phase, peak_time_s, stage position/velocity).
-See docs/ros_interfaces.md (Simulated world) for the topics.
+catching up), and publishes /clock after each step. The simulated devices reach the world by
+direct calls (a LocalWorldPort on `runner`), in the same process: the node is one part of
+mantis_rig.nodes.sim_rig, the simulated rig. Once a wall second, /diagnostics gets the status
+`sim_world_node: world` (keys time_s, phase, peak_time_s, stage position/velocity).
 """
 from __future__ import annotations
 
-from collections import deque
-import math
-import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock as RosClock
 from rclpy.clock import ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 from mantis_rig.hardware.local_world import WorldRunner
 from mantis_rig.nodes.device_node import Param, declare, param_value, time_msg
-from mantis_rig.nodes.executors import SideNode, run_node
-from mantis_rig.nodes.ros_world_port import (
-    CAMERA_FRAMES_TOPIC,
-    CAMERA_REQUEST_TOPIC,
-    FORCE_TOPIC,
-    MOVE_COMMAND,
-    STAGE_COMMAND_TOPIC,
-    STAGE_STATE_TOPIC,
-    STREAM_QOS,
-    stage_command_from_msg,
-)
-from mantis_rig.recording.force_block import force_block_from_msg, force_block_to_msg
-from mantis_rig.recording.marker_block import marker_block_to_msg
+from mantis_rig.nodes.executors import SideNode
+from mantis_rig.recording.force_block import force_block_from_msg
 from mantis_sim.scene import load_scene
 from mantis_sim.world import World
 
 DEFAULT_SCENE = 'air_23mm_rig'
 DAQ_FORCE_TOPIC = '/loadcell/force_block'
-MAX_REQUEST_FRAMES = 200_000
 
 PARAMETERS = (
     Param('scene', DEFAULT_SCENE, 'mantis_sim scene name (see `mantis scenes`) or YAML path'),
@@ -58,7 +38,6 @@ PARAMETERS = (
     Param('real_time_factor', 1.0, 'simulated seconds per wall second (0: as fast as it can)',
           (0.0, 1000.0)),
     Param('step_s', 0.01, 'simulated time per world step, s', (1e-4, 0.1)),
-    Param('force_rate_hz', 20_000.0, 'sample rate of /sim/tendon_force, Hz', (1.0, 2e6)),
     Param('max_lead_s', 0.05, 'simulated time the world may run ahead of the load cell\'s '
           '/loadcell/force_block stream while that streams, s (0: no limit)', (0.0, 10.0)),
 )
@@ -76,24 +55,12 @@ class SimWorldNode(Node):
         self.scene = load_scene(value('scene'), [s for s in value('set') or [] if s])
         self.world = World(self.scene)
         self.step_s = value('step_s')
-        self.force_rate_hz = value('force_rate_hz')
-        self._next_sample = math.ceil(self.world.time_s * self.force_rate_hz - 1e-6)
         self._step_index = round(self.world.time_s / self.step_s)
-        self._requests: list[tuple[float, float, float]] = []
-        # Commands wait here for the runner thread: taking the world's lock from a callback
-        # would starve while the runner, behind its pace, steps back to back.
-        self._inbox: deque = deque()
         self._phase = self.world.phase
 
-        self._force_pub = self.create_publisher(Float64MultiArray, FORCE_TOPIC, STREAM_QOS)
-        self._stage_pub = self.create_publisher(JointState, STAGE_STATE_TOPIC, STREAM_QOS)
-        self._frames_pub = self.create_publisher(Float64MultiArray, CAMERA_FRAMES_TOPIC, 10)
         self._clock_pub = self.create_publisher(Clock, '/clock', QoSProfile(depth=10))
-        # in-process followers of the world's time (a one-process stack's shared sim clock)
+        # in-process followers of the world's time (the rig's shared sim clock)
         self.clock_listeners: list = []
-        self.create_subscription(Float64MultiArray, STAGE_COMMAND_TOPIC, self._on_stage_command,
-                                 10)
-        self.create_subscription(Float64MultiArray, CAMERA_REQUEST_TOPIC, self._on_request, 10)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_timer(1.0, self._publish_diagnostics,
                           clock=RosClock(clock_type=ClockType.STEADY_TIME))
@@ -113,7 +80,7 @@ class SimWorldNode(Node):
         self.runner.start()
         self.get_logger().info(
             f'simulated world {self.scene.name!r} running at {value("real_time_factor")}x, '
-            f'steps of {self.step_s * 1e3:g} ms, force at {self.force_rate_hz:g} Hz')
+            f'steps of {self.step_s * 1e3:g} ms')
 
     def destroy_node(self):
         self.runner.stop()
@@ -134,6 +101,9 @@ class SimWorldNode(Node):
         return (self.max_lead_s > 0 and end is not None
                 and time.monotonic() - self._daq_heard < STREAM_ALIVE_S
                 and self.world.time_s - end > self.max_lead_s)
+
+    def publish_clock(self, msg: Clock) -> None:
+        self._clock_pub.publish(msg)
 
     def _publish_diagnostics(self) -> None:
         with self.runner.lock:
@@ -166,77 +136,21 @@ class SimWorldNode(Node):
                            f'the new value')
         return SetParametersResult(successful=True)
 
-    # --- from the device nodes (executor threads) -------------------------------------------
-    def _on_stage_command(self, msg: Float64MultiArray) -> None:
-        try:
-            self._inbox.append(stage_command_from_msg(msg))
-        except ValueError as exc:
-            self.get_logger().warning(f'{STAGE_COMMAND_TOPIC}: ignored: {exc}')
-
-    def _on_request(self, msg: Float64MultiArray) -> None:
-        if len(msg.data) != 3:
-            self.get_logger().warning(f'{CAMERA_REQUEST_TOPIC}: expected [t_start_s, t_end_s, '
-                                      f'frame_rate_hz], got {len(msg.data)} values')
-            return
-        t_start, t_end, rate = (float(x) for x in msg.data)
-        frames = (t_end - t_start) * rate + 1
-        if not (t_end >= t_start and rate > 0 and 0 < frames <= MAX_REQUEST_FRAMES):
-            self.get_logger().warning(f'{CAMERA_REQUEST_TOPIC}: refused request {t_start}, '
-                                      f'{t_end}, {rate} (at most {MAX_REQUEST_FRAMES} frames)')
-            return
-        self._inbox.append(('request', (t_start, t_end, rate)))
-
     # --- the world's step (runner thread) ---------------------------------------------------
-    def before_step(self) -> float:
-        """Under the world's lock: apply what arrived; return the step's target time."""
-        while self._inbox:
-            kind, values = self._inbox.popleft()
-            if kind == 'request':
-                self._requests.append(values)
-            elif kind == MOVE_COMMAND:
-                self.world.move_stage_to(*values)
-            else:
-                self.world.set_stage_velocity(*values)
+    def next_step_time_s(self) -> float:
         self._step_index += 1
         return self._step_index * self.step_s
 
-    def collect(self) -> list:
-        """After a step, under the world's lock: the messages to publish, in order."""
-        world, t_new = self.world, self.world.time_s
-        out = []
-        end = math.floor(t_new * self.force_rate_hz + 1e-6) + 1
-        if end > self._next_sample:
-            index = np.arange(self._next_sample, end)
-            forces = world.tendon_force_N(index / self.force_rate_hz)
-            out.append((self._force_pub, force_block_to_msg(
-                round(self._next_sample * 1e9 / self.force_rate_hz),
-                round(1e9 / self.force_rate_hz), forces)))
-            self._next_sample = end
-        state = JointState(name=['stage'], position=[world.stage_position_m()],
-                           velocity=[world.stage_velocity_m_per_s()], effort=[0.0])
-        state.header.stamp = time_msg(t_new)
-        out.append((self._stage_pub, state))
-        due = [r for r in self._requests if r[1] <= t_new + 1e-9]
-        self._requests = [r for r in self._requests if r[1] > t_new + 1e-9]
-        out += [(self._frames_pub, self._frames(*r)) for r in due]
-        out.append((self._clock_pub, Clock(clock=time_msg(t_new))))
-        if world.phase != self._phase:
-            self._phase = world.phase
-            self.get_logger().info(f'phase {self._phase} at {t_new:.3f} s')
-        return out
-
-    def _frames(self, t_start: float, t_end: float, rate: float) -> Float64MultiArray:
-        times = t_start + np.arange(round((t_end - t_start) * rate) + 1) / rate
-        try:
-            markers = self.world.marker_positions_m(times)
-        except Exception as exc:     # outside the history: reply with the times and no markers
-            self.get_logger().error(f'camera request {t_start:.6f}..{t_end:.6f} s: {exc}')
-            markers = {}
-        return marker_block_to_msg(times, markers)
+    def clock_message(self) -> Clock:
+        """After a step, under the world's lock: the world's time, as /clock carries it."""
+        if self.world.phase != self._phase:
+            self._phase = self.world.phase
+            self.get_logger().info(f'phase {self._phase} at {self.world.time_s:.3f} s')
+        return Clock(clock=time_msg(self.world.time_s))
 
 
 class _StepRunner(WorldRunner):
-    """WorldRunner that publishes what each step produced (outside the world's lock)."""
+    """WorldRunner that publishes /clock after each step (outside the world's lock)."""
 
     def __init__(self, world: World, real_time_factor: float, step_s: float,
                  node: SimWorldNode):
@@ -246,22 +160,13 @@ class _StepRunner(WorldRunner):
     def step(self) -> None:
         try:
             with self.lock:
-                self.world.advance_to(self.node.before_step())
-                messages = self.node.collect()
+                self.world.advance_to(self.node.next_step_time_s())
+                clock = self.node.clock_message()
                 self.lock.notify_all()
-            for publisher, msg in messages:
-                publisher.publish(msg)
-                if isinstance(msg, Clock):
-                    for listener in self.node.clock_listeners:
-                        listener(msg)
+            for listener in self.node.clock_listeners:
+                listener(clock)
+            self.node.publish_clock(clock)
         except Exception as exc:
             self.node.get_logger().fatal(f'the simulated world stopped: {exc!r}')
             raise
 
-
-def main(args=None) -> int:
-    return run_node(SimWorldNode, args)
-
-
-if __name__ == '__main__':
-    sys.exit(main())
