@@ -355,6 +355,17 @@ def test_unknown_backend_fails_configure_with_the_reason_on_diagnostics(rig):
     assert 'sim, hardware' in errors[-1].message
 
 
+def test_a_simulated_device_alone_refuses_to_configure_and_names_the_rig(rig):
+    """Outside the simulated rig there is no world for the sim backend to reach."""
+    rig.add(LoadcellNode(context=rig.context, parameter_overrides=sim_overrides()))
+    assert not rig.transition('loadcell_node', Transition.TRANSITION_CONFIGURE)
+    assert rig.state('loadcell_node') == 'unconfigured'
+    errors = rig.wait_for(lambda: [s for s in rig.diagnostics('loadcell_node')
+                                   if s.level == DiagnosticStatus.ERROR], 'an ERROR', 30.0)
+    assert 'runs inside the simulated rig' in errors[-1].message
+    assert 'ros2 run mantis_rig sim_rig' in errors[-1].message
+
+
 class FailingWorld(WorldPort):
     """A simulated world that serves a few force blocks, then its link fails."""
 
