@@ -4,9 +4,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from mantis_sim.errors import InputError
 from mantis_sim.model import SimulationError
-from mantis_sim.parameters import ParameterError
-from mantis_sim.scene import SceneError
 
 from . import cli_replay, cli_sim, cli_trial
 
@@ -27,7 +26,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.run(args) or 0
-    except (ParameterError, SceneError) as exc:
+    except InputError as exc:     # bad input, named in the message: one line, no traceback
         print(f'mantis {args.command}: {exc}', file=sys.stderr)
         return USAGE_ERROR
     except SimulationError as exc:

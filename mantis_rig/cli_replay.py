@@ -19,7 +19,7 @@ def _err(command, text):
 def run_replay(args) -> int:
     import rclpy
 
-    from .replay import BagPlayer, ReplayError
+    from .replay import BagPlayer
     from .replay.schedule import raise_priority
     from .ros_env import claim_local_domain
 
@@ -40,13 +40,8 @@ def run_replay(args) -> int:
     node = rclpy.create_node('mantis_replay')
     stop = threading.Event()
     try:
-        try:
-            player = BagPlayer(node, args.bag, rate=args.rate, loop=args.loop,
-                               topics=args.topics, clock_hz=args.clock,
-                               realtime=args.realtime)
-        except ReplayError as exc:
-            _err('replay', exc)
-            return 1
+        player = BagPlayer(node, args.bag, rate=args.rate, loop=args.loop, topics=args.topics,
+                           clock_hz=args.clock, realtime=args.realtime)
         for problem in player.report.problems:
             _err('replay', f'warning: {problem}; replaying the messages before the damage')
         if args.wait_for_subscribers > 0 and not player.wait_for_subscribers(
@@ -154,21 +149,13 @@ def given_conditions(args) -> dict:
 
 # ------------------------------------------------------------------------- import-tracking
 def run_import(args) -> int:
-    from .analysis import TrackFormatError, analyze_tracks, load_tracks
+    from .analysis import analyze_tracks, load_tracks
     from .analysis.conditions import params_for_trial
     from .analysis.tracking_import import write_tracking_bag
-    from .nodes.trial_conditions import ConditionError
 
-    try:
-        given = given_conditions(args)
-    except ConditionError as exc:
-        _err('import-tracking', exc)
-        return USAGE_ERROR
+    given = given_conditions(args)
     try:
         tracks = load_tracks(args.file, **export_options(args))
-    except TrackFormatError as exc:
-        _err('import-tracking', exc)
-        return USAGE_ERROR
     except OSError as exc:
         _err('import-tracking', f'{args.file}: {exc}')
         return USAGE_ERROR
@@ -254,17 +241,10 @@ def run_analyze(args) -> int:
 
 
 def _analyze_one(args) -> int:
-    from .analysis import TrackFormatError
     from .analysis.bag_input import is_bag_path, load_trial_input
     from .analysis.batch import TrialRefused, analyse_trial
-    from .nodes.trial_conditions import ConditionError
-    from .recording import BagError
 
-    try:
-        given = given_conditions(args)
-    except ConditionError as exc:
-        _err('analyze', exc)
-        return USAGE_ERROR
+    given = given_conditions(args)
     bag = is_bag_path(args.path)
     options = export_options(args)
     if bag and any(v is not None for v in options.values()):
@@ -273,9 +253,9 @@ def _analyze_one(args) -> int:
         return USAGE_ERROR
     try:
         trial = load_trial_input(args.path, **options)
-    except (BagError, TrackFormatError, OSError) as exc:
+    except OSError as exc:
         _err('analyze', exc)
-        return 1 if bag else USAGE_ERROR
+        return USAGE_ERROR
     if trial.problems:
         _err('analyze', f'warning: {args.path} is damaged: {"; ".join(trial.problems)}')
         _err('analyze', f'warning: analysing the {trial.tracks.n_frames} frames recorded '
@@ -283,8 +263,7 @@ def _analyze_one(args) -> int:
     try:
         analysis, warned, parameters = analyse_trial(trial, given)
     except TrialRefused as exc:
-        _err('analyze', f'{args.path}: {exc}')
-        return 1
+        raise TrialRefused(f'{args.path}: {exc}') from exc
     for text in warned:
         _err('analyze', f'warning: {text}')
     report = analysis_report(analysis, trial, args.path, parameters)
@@ -301,17 +280,12 @@ def _analyze_one(args) -> int:
 def run_analyze_batch(args) -> int:
     """Every trial the paths name, analysed in parallel, one row each in the --table CSV."""
     from .analysis.batch import Progress, expand_paths, is_bag_dir, run_batch, write_table
-    from .nodes.trial_conditions import ConditionError
 
     if args.json or args.plot:
         _err('analyze', '--json and --plot apply to one trial; a batch (several paths or '
                         '--table) writes its table (--table FILE.csv, or - for stdout)')
         return USAGE_ERROR
-    try:
-        given = given_conditions(args)
-    except ConditionError as exc:
-        _err('analyze', exc)
-        return USAGE_ERROR
+    given = given_conditions(args)
     table = args.table if args.table is not None else '-'
     to_stdout = table == '-'
     if not to_stdout and not Path(table).resolve().parent.is_dir():

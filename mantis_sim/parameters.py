@@ -10,8 +10,10 @@ from dataclasses import dataclass, field, fields, replace
 import math
 from typing import Any, Optional
 
+from .errors import InputError
 
-class ParameterError(ValueError):
+
+class ParameterError(InputError):
     """A scene key or value is unknown or out of range; the message names key, value and range."""
 
 

@@ -9,6 +9,7 @@ from typing import Optional
 
 import yaml
 
+from .errors import InputError
 from .parameters import (
     SECTIONS,
     Arm,
@@ -44,7 +45,7 @@ EFFECTS = {
 }
 
 
-class SceneError(ValueError):
+class SceneError(InputError):
     """A scene cannot be found or parsed; the message names the file and the problem."""
 
 

@@ -136,11 +136,11 @@ def test_truncated_bag_is_analysed_up_to_the_damage(imported_bag, csv_analysis, 
 def test_bag_cut_before_the_strike_fails_with_reason(imported_bag, capsys, tmp_path):
     cut = cut_copy(imported_bag, tmp_path / 'early', 0.5)
     code, _, err = analyze_json(capsys, cut)
-    assert code == 1
+    assert code == 2
     assert 'damaged at byte' in err and 'not enough data before the damage' in err
     nothing = cut_copy(imported_bag, tmp_path / 'nothing', 0.001)
     code, _, err = analyze_json(capsys, nothing)
-    assert code == 1 and 'no marker frames on /camera/markers' in err
+    assert code == 2 and 'no marker frames on /camera/markers' in err
 
 
 def test_corrupted_chunk_is_reported_and_the_data_before_it_analysed(imported_bag, capsys,
@@ -183,7 +183,7 @@ def bag_with_force(path, tracks, newtons_scale=1.0):
 def test_an_impossible_tendon_work_is_refused(capsys, tmp_path):
     bag_with_force(tmp_path / 'huge_force', load_tracks(DATA), newtons_scale=1e11)
     code, _, err = analyze_json(capsys, tmp_path / 'huge_force')
-    assert code == 1
+    assert code == 2
     assert 'tendon work' in err and "beyond the robot's 300 mJ" in err
 
 
@@ -266,7 +266,7 @@ def test_analyze_bad_paths(tmp_path, capsys):
     assert code == 2 and 'absent.csv' in err
     (tmp_path / 'empty_dir').mkdir()
     code, _, err = run(capsys, 'analyze', tmp_path / 'empty_dir')
-    assert code == 1 and 'not a bag' in err
+    assert code == 2 and 'not a bag' in err
 
 
 def test_frames_without_the_strike_are_refused_with_the_reason():
@@ -372,7 +372,7 @@ def test_bag_contents_that_pass_the_crc_but_are_wrong_are_refused_with_the_reaso
 
     garbage = rewritten_copy(imported_bag, tmp_path / 'garbage', lambda m: b'\x00\x01\x00')
     code, _, err = analyze_json(capsys, garbage)
-    assert code == 1, err
+    assert code == 2, err
     assert 'on /camera/markers at log time' in err and 'cannot be decoded as' in err
 
     def short_block(message):
@@ -381,7 +381,7 @@ def test_bag_contents_that_pass_the_crc_but_are_wrong_are_refused_with_the_reaso
         return serialize_message(msg)
     short = rewritten_copy(imported_bag, tmp_path / 'short', short_block)
     code, _, err = analyze_json(capsys, short)
-    assert code == 1, err
+    assert code == 2, err
     assert 'a malformed block on /camera/markers at log time' in err
     assert 'its layout declares' in err
 
@@ -403,5 +403,5 @@ def test_a_bags_trial_conditions_are_checked_like_the_command_lines(imported_bag
                                                                      tmp_path, conditions, why):
     bag = rewritten_copy(imported_bag, tmp_path / 'conditions', conditions=conditions)
     code, _, err = analyze_json(capsys, bag)
-    assert code == 1, err
+    assert code == 2, err
     assert f'trial conditions: {why}' in err

@@ -19,6 +19,7 @@ from sensor_msgs.msg import JointState, TimeReference
 from std_msgs.msg import String
 import yaml
 
+from mantis_rig.cli import main as cli_main
 from mantis_rig.recording import (
     BagClosedError,
     BagError,
@@ -427,8 +428,9 @@ def test_main_recover_cli(tmp_path, capsys):
     assert main_recover([str(tmp_path / 'crash'), '-o', str(tmp_path / 'fixed')]) == 0
     assert 'recovered' in capsys.readouterr().out
     assert BagReader(tmp_path / 'fixed').complete
-    assert main_recover([str(tmp_path / 'nothing_here')]) == 1
-    assert 'no such file' in capsys.readouterr().err
+    assert cli_main(['recover', str(tmp_path / 'nothing_here')]) == 2     # bad input
+    assert capsys.readouterr().err == (f'mantis recover: {tmp_path / "nothing_here"}: no such '
+                                       f'file or directory\n')
     with BagWriter(tmp_path / 'empty', sync_period_s=0) as empty:
         empty.add_topic('/events', 'std_msgs/msg/String')
     assert main_recover([str(tmp_path / 'empty'), '-o', str(tmp_path / 'empty_out')]) == 1

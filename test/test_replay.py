@@ -274,7 +274,7 @@ def test_truncated_bag_replays_what_precedes_the_damage(trial_bag, ros_context, 
 
 def test_missing_bag_gives_error_exit(tmp_path):
     result = run_cli('replay', tmp_path / 'nothing')
-    assert result.returncode == 1
+    assert result.returncode == 2                  # bad input
     assert 'no such file or directory' in result.stderr
 
 

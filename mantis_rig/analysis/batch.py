@@ -28,6 +28,8 @@ import warnings
 
 import numpy as np
 
+from mantis_sim.errors import InputError
+
 from ..recording import BagError
 from .bag_input import load_trial_input
 from .conditions import params_for_trial
@@ -57,7 +59,7 @@ def strike_recorded(analysis) -> bool:
     return bool(i < len(tip) - 1 and tip[i + 1:].min() < STRIKE_END_SHARE * tip[i])
 
 
-class TrialRefused(ValueError):
+class TrialRefused(InputError):
     """A trial that was read but cannot be analysed; the message says why."""
 
 

@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 
+from mantis_sim.errors import InputError
+
 from . import phases as ph
 from .energy import (
     InertiaParams,
@@ -146,7 +148,7 @@ def analyze_tracks(tracks: MarkerTracks, params: AnalysisParams | None = None) -
     return result
 
 
-class StrikeLost(ValueError):
+class StrikeLost(InputError):
     """The markers were lost where the peak tip speed is measured: no number is given."""
 
 
@@ -179,7 +181,7 @@ def check_strike_tracked(result: TrialAnalysis, frame_times_s: np.ndarray) -> in
     return int(in_strike.size)
 
 
-class ImplausibleResult(ValueError):
+class ImplausibleResult(InputError):
     """The analysis gave a number the robot cannot produce: it is refused, with the reason."""
 
 

@@ -27,6 +27,8 @@ import re
 
 import numpy as np
 
+from mantis_sim.errors import InputError
+
 LOST_MARKER = -1.0
 # Millimetres per unit of the tracker's ``Export Units`` / ``Calibration Units``.
 UNIT_MM = {'millimeters': 1.0, 'millimetres': 1.0, 'mm': 1.0,
@@ -37,7 +39,7 @@ _RATE_IN_NAME = re.compile(r'(?<![0-9a-z])(\d+(?:[.p]\d+)?)\s*kfps', re.IGNORECA
 _FEATURE = re.compile(r'\(([^()]*)\)\s*$')
 
 
-class TrackFormatError(ValueError):
+class TrackFormatError(InputError):
     """A tracking file does not have a layout the readers accept, or contradicts itself (this
     module's and :mod:`.tracking`'s one error for bad tracking files)."""
 

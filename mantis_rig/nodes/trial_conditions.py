@@ -17,6 +17,7 @@ from mantis_rig.safety_limits import (
     FORCE_CEILING_DESCRIPTION,
     FORCE_CEILING_RANGE_N,
 )
+from mantis_sim.errors import InputError
 
 BACKENDS = ('sim', 'hardware')
 _STAGE = StageLimits()                      # the driver's envelope: speed ceiling and travel
@@ -74,7 +75,7 @@ CONDITION_KEYS = ('pull_speed_mm_s', 'medium', 'd_t_mm', 'contact_angle_deg', 'f
                   'travel_mm', 'operator_note', 'scene', 'backend')
 
 
-class ConditionError(ValueError):
+class ConditionError(InputError):
     """A trial condition or setting is out of range; the message says which and why."""
 
 

@@ -5,6 +5,8 @@ from pathlib import Path
 
 import yaml
 
+from mantis_sim.errors import InputError
+
 from .yaml_emit import emit_yaml
 
 METADATA_FILENAME = 'metadata.yaml'
@@ -112,7 +114,7 @@ def fsync_dir(directory):
         os.close(fd)
 
 
-class MetadataFileError(ValueError):
+class MetadataFileError(InputError):
     """metadata.yaml exists but is not a readable rosbag2 metadata file."""
 
 

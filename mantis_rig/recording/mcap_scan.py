@@ -15,13 +15,15 @@ from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, DataEnd, Footer, Header, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
+from mantis_sim.errors import InputError
+
 MAGIC = b'\x89MCAP0\r\n'
 _RECORD_PREFIX = struct.Struct('<BQ')
 _KNOWN_OPCODES = {int(op) for op in Opcode}
 _FOOTER_RECORD_SIZE = _RECORD_PREFIX.size + 20
 
 
-class NotMcapError(ValueError):
+class NotMcapError(InputError):
     """The file is not an MCAP file at all (or is empty)."""
 
 

@@ -15,6 +15,8 @@ import warnings
 from mcap.reader import make_reader
 from rclpy.serialization import deserialize_message
 
+from mantis_sim.errors import InputError
+
 from .bag_metadata import (
     METADATA_FILENAME,
     ROSBAG2_RECORD_NAME,
@@ -25,7 +27,7 @@ from .interfaces import message_class
 from .mcap_scan import NotMcapError, has_valid_tail, scan_mcap
 
 
-class BagError(Exception):
+class BagError(InputError):
     """The path is not a readable rosbag2 MCAP bag (names the file and the problem)."""
 
 
@@ -119,6 +121,8 @@ class BagReader:
             if has_valid_tail(mcap_path):
                 self._load_indexed(mcap_path)
                 return
+        except BagError:
+            raise
         except (OSError, ValueError) as exc:  # tail unreadable: fall back to a scan
             self.problems.append(f'{mcap_path}: summary unreadable ({exc}), scanned instead')
         try:

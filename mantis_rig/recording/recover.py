@@ -12,7 +12,7 @@ import sys
 
 from .bag_metadata import ROSBAG2_RECORD_NAME
 from .qos import parse_offered_qos_string
-from .reader import BagError, BagReader
+from .reader import BagReader
 from .writer import BagWriter
 
 RECOVERY_RECORD = 'mantis_recovery'
@@ -78,7 +78,7 @@ def main_recover(argv=None):
     args = parser.parse_args(argv)
     try:
         report = recover_bag(args.bag, args.output)
-    except (BagError, FileExistsError, OSError) as exc:
+    except (FileExistsError, OSError) as exc:      # a BagError (bad input) goes up: exit 2
         print(f'mantis recover: {exc}', file=sys.stderr)
         return 1
     print(report)

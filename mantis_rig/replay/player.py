@@ -20,6 +20,8 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
+from mantis_sim.errors import InputError
+
 from ..recording import BagError, BagReader
 from ..recording.interfaces import MessageTypeError, message_class
 from ..recording.qos import parse_offered_qos_string
@@ -33,7 +35,7 @@ DISCOVERY_SETTLE_S = 0.2
 CLOCK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
 
 
-class ReplayError(Exception):
+class ReplayError(InputError):
     """The bag cannot be replayed as asked (names the bag and the reason)."""
 
 

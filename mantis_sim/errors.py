@@ -1,0 +1,14 @@
+"""The root of every bad-input error, for mantis_sim and mantis_rig alike.
+
+InputError: a file, a field or a value that cannot be used, or a result it would give that is
+physically impossible. Its message names which, and where (the file; the record, topic and log
+time; the row; the key). The `mantis` command line reports it in one line and exits 2; any
+other exception is a bug and keeps its traceback.
+"""
+
+
+class InputError(ValueError):
+    """Bad input, named in the message (see the module docstring)."""
+
+
+__all__ = ['InputError']
