@@ -41,7 +41,8 @@ def run_replay(args) -> int:
     stop = threading.Event()
     try:
         player = BagPlayer(node, args.bag, rate=args.rate, loop=args.loop, topics=args.topics,
-                           clock_hz=args.clock, realtime=args.realtime)
+                           clock_hz=args.clock, realtime=args.realtime,
+                           time_jumps=args.time_jumps)
         for problem in player.report.problems:
             _err('replay', f'warning: {problem}; replaying the messages before the damage')
         if args.wait_for_subscribers > 0 and not player.wait_for_subscribers(
@@ -352,6 +353,10 @@ def add_commands(commands) -> None:
     replay.add_argument('bag', help='bag directory or .mcap file')
     replay.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1)')
     replay.add_argument('--loop', action='store_true', help='start again at the end')
+    replay.add_argument('--time-jumps', choices=('refuse', 'skip'), default='refuse',
+                        help="a message whose log time lies outside the span the bag's "
+                        'metadata.yaml states (a damaged time stamp): refuse the replay, naming '
+                        'it (default), or skip such messages and list them in the report')
     replay.add_argument('--topics', nargs='+', metavar='TOPIC', help='only these topics')
     replay.add_argument('--clock', type=float, nargs='?', const=100.0, default=None,
                         metavar='HZ', help='publish /clock from the log times (default 100 Hz)')

@@ -336,3 +336,31 @@ def test_playback_clock_and_sleep_until():
     stop = threading.Event()
     stop.set()
     assert not sleep_until(time.perf_counter() + 5.0, stop)
+
+
+def bag_with_a_time_jump(path):
+    """A bag whose last message's log time is 31.7 years ahead of the span its metadata.yaml
+    states, as a damaged time stamp leaves it."""
+    from std_msgs.msg import String
+    import yaml
+    with BagWriter(path, sync_period_s=0) as bag:
+        for i in range(5):
+            bag.write('/events', String(data=f'e{i}'), 1_000_000_000 + i * 10**8)
+        bag.write('/events', String(data='jump'), 10**18)
+    meta = yaml.safe_load((path / 'metadata.yaml').read_text())
+    meta['rosbag2_bagfile_information']['duration']['nanoseconds'] = 4 * 10**8
+    (path / 'metadata.yaml').write_text(yaml.safe_dump(meta))
+    return path
+
+
+def test_a_log_time_jump_is_refused_or_skipped_as_asked(tmp_path):
+    bag = bag_with_a_time_jump(tmp_path / 'jump')
+    refused = run_cli('replay', bag)
+    assert refused.returncode == 2, refused.stdout + refused.stderr
+    assert refused.stderr.count('\n') == 1 and 'Traceback' not in refused.stderr
+    assert 'message 5 (on /events) has log time 1000000000.000000 s, outside the 1.000000 .. ' \
+           "1.400000 s that the bag's metadata.yaml spans; replay refused" in refused.stderr
+    skipped = run_cli('replay', bag, '--time-jumps', 'skip', '--rate', '10')
+    assert skipped.returncode == 0, skipped.stdout + skipped.stderr
+    assert 'replayed 5 messages' in skipped.stdout
+    assert 'skipped (time jump): message 5 (on /events)' in skipped.stdout

@@ -33,6 +33,21 @@ CLOCK_TOPIC = '/clock'
 RCLError = _rclpy.RCLError
 DISCOVERY_SETTLE_S = 0.2
 CLOCK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
+TIME_JUMP_CHOICES = ('refuse', 'skip')
+# the metadata's span is stated to the nanosecond; a little slack for writers that round it
+SPAN_TOLERANCE_NS = 1_000_000
+
+
+def metadata_span_ns(reader) -> tuple[int, int] | None:
+    """(first, last) log time, ns, that the bag's metadata.yaml says it spans; None without a
+    metadata.yaml (a bag not closed cleanly) or without a usable span in it."""
+    info = reader.metadata_yaml
+    try:
+        start = int(info['starting_time']['nanoseconds_since_epoch'])
+        duration = int(info['duration']['nanoseconds'])
+    except (KeyError, TypeError, ValueError, OverflowError):
+        return None
+    return (start, start + duration) if duration >= 0 else None
 
 
 class ReplayError(InputError):
@@ -50,6 +65,7 @@ class PlaybackReport:
     stats: TimingStats = field(default_factory=TimingStats)  # last complete pass
     interrupted: bool = False
     scheduling: str = 'normal'  # of the playback thread
+    time_jumps: list = field(default_factory=list)  # messages skipped outside the bag's span
 
     def __str__(self):
         s = self.stats.summary()
@@ -64,6 +80,7 @@ class PlaybackReport:
             lines.append(f'  {CLOCK_TOPIC}: {self.clock_ticks}')
         lines += [f'  skipped {topic}: {why}' for topic, why in self.skipped_topics.items()]
         lines += [f'  bag problem: {p}' for p in self.problems]
+        lines += [f'  skipped (time jump): {jump}' for jump in self.time_jumps]
         return '\n'.join(lines)
 
 
@@ -74,10 +91,18 @@ class BagPlayer:
     ``loop``: start again after the last message until stopped; ``clock_hz``: publish /clock at
     this wall-clock frequency (None/0: no /clock); ``realtime``: run the playback thread with
     real-time priority if the system permits (see :func:`.schedule.raise_priority`).
+    ``time_jumps``: what to do with a message whose log time lies outside the span the bag's
+    metadata.yaml states (a damaged log time, which would otherwise stall the replay for as
+    long as it jumps): 'refuse' (ReplayError naming it; the read-ahead holds a whole trial bag
+    before the first publication, so nothing of one is played) or 'skip' (listed in the
+    report's time_jumps).
     """
 
     def __init__(self, node, path, *, rate=1.0, loop=False, topics=None, clock_hz=None,
-                 realtime=False):
+                 realtime=False, time_jumps='refuse'):
+        if time_jumps not in TIME_JUMP_CHOICES:
+            raise ReplayError(f'time_jumps must be one of {TIME_JUMP_CHOICES}, got '
+                              f'{time_jumps!r}')
         if not rate > 0:
             raise ReplayError(f'rate must be > 0, got {rate}')
         if clock_hz is not None and clock_hz < 0:
@@ -88,6 +113,8 @@ class BagPlayer:
             raise ReplayError(str(exc)) from exc
         self.rate, self.loop, self.clock_hz = float(rate), bool(loop), clock_hz or None
         self.realtime = realtime
+        self.time_jumps = time_jumps
+        self.span_ns = metadata_span_ns(self.reader)
         self.context = node.context
         self.report = PlaybackReport(bag=str(path), problems=list(self.reader.problems))
         available = self.reader.topics
@@ -162,8 +189,9 @@ class BagPlayer:
 
     def _play_once(self, stop) -> bool:
         stats = TimingStats()
-        source = ReadAhead((m.log_time, ch.topic, bytes(m.data))
-                           for ch, _, m in self.reader.raw_messages(list(self.publishers)))
+        source = ReadAhead(self._within_span(
+            (m.log_time, ch.topic, bytes(m.data))
+            for ch, _, m in self.reader.raw_messages(list(self.publishers))))
         source.fill()  # before the clock starts: a trial bag is read whole here
         first = source.peek()
         if first is None:
@@ -198,6 +226,26 @@ class BagPlayer:
                 source.fill(clock.deadline(following[0]))
         self.report.stats = stats
         return True
+
+    def _within_span(self, items):
+        """The items, checked against the metadata's span (``time_jumps``)."""
+        if self.span_ns is None:
+            yield from items
+            return
+        first, last = self.span_ns
+        for index, item in enumerate(items):
+            log_ns, topic = item[0], item[1]
+            if first - SPAN_TOLERANCE_NS <= log_ns <= last + SPAN_TOLERANCE_NS:
+                yield item
+                continue
+            where = (f'message {index} (on {topic}) has log time {log_ns * 1e-9:.6f} s, '
+                     f'outside the {first * 1e-9:.6f} .. {last * 1e-9:.6f} s that the '
+                     f"bag's metadata.yaml spans")
+            if self.time_jumps == 'refuse':
+                raise ReplayError(f'{self.report.bag}: {where}; replay refused (--time-jumps '
+                                  f'skip replays the bag without such messages)')
+            if self.report.passes == 0:            # once, not on every pass of a loop
+                self.report.time_jumps.append(where)
 
     def _publish_clock(self, log_ns):
         msg = Clock()
