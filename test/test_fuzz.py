@@ -1,5 +1,6 @@
-"""Fuzz suite (issue 16): damaged bags, bag metadata and scenes are read or refused with the
-reader's own error, never another exception, never a hang.
+"""Fuzz suite (issue 16): damaged bags, bag metadata, tracking files and scenes are read or
+refused with the reader's own error, never another exception, never a hang; a damaged tracking
+file that is analysed gives only numbers the robot can produce.
 
 Property-based with hypothesis. The CI profile (default) is small and deterministic; the long
 profile runs by one command:
@@ -7,8 +8,8 @@ profile runs by one command:
     MANTIS_FUZZ_PROFILE=long .venv/bin/python -m pytest -q test/test_fuzz.py
 
 Each case writes the damaged copy to a fresh directory; the source files are never touched.
-Damaged tracking files are covered by test_tracker_export.py (seeded damaged copies of real
-exports).
+Damaged spreadsheets (.xlsx) are covered by test_tracker_export.py (seeded damaged copies of
+real exports); the tracker's CSV export is fuzzed here, cell by cell and in its header.
 """
 import os
 from pathlib import Path
@@ -24,10 +25,12 @@ from mcap.reader import make_reader
 import pytest
 import yaml
 
-from mantis_rig.analysis.bag_input import read_trial_bag
+from mantis_rig.analysis.bag_input import load_trial_input, read_trial_bag
+from mantis_rig.analysis.batch import analyse_trial
 from mantis_rig.analysis.tracking import TrackFormatError
 from mantis_rig.recording import BagError, BagReader, BagWriter, TruncatedBagWarning
 from mantis_rig.replay.synthetic import TOPICS, synthetic_messages
+from mantis_sim.errors import InputError
 from mantis_sim.parameters import ParameterError
 from mantis_sim.scene import SceneError, load_scene_file
 
@@ -202,3 +205,102 @@ def test_random_bytes_as_a_scene_are_refused(tmp_path_factory, data):
     path.write_bytes(data)
     with pytest.raises((SceneError, ParameterError)):
         load_scene_file(path)
+
+
+# ------------------------------------------------------------------ tracking files (CSV)
+PAIR_CSV = REPO / 'test' / 'data' / 'real_trials' / 'air_23mm_19kfps_pair_track.csv'
+WINDOW = (9000, 11300)        # frames around the strike: a whole analysis in about 0.1 s
+# Numbers reach the analysis (NaN, infinities, the tracker's -1 for a lost marker, blanks,
+# huge values, plausible but wrong positions); any text or bytes tests the reader itself.
+NUMERIC_CELLS = st.one_of(
+    st.sampled_from(['', 'nan', 'NaN', 'inf', '-inf', '-1', '0', '-0', '1e308', '-1e308',
+                     '1e400']),
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.floats(-60.0, 60.0).map(lambda x: f'{x:.4f}'))
+CELL_VALUES = st.one_of(
+    NUMERIC_CELLS,
+    st.sampled_from(['12.5.3', 'x', '"', ',', '\n', '\r', ';']),
+    st.text(max_size=12),
+    st.binary(max_size=6))
+
+
+@pytest.fixture(scope='module')
+def tracking_lines():
+    """The real tracker CSV export's two header lines and the frames around its strike."""
+    lines = PAIR_CSV.read_bytes().splitlines()
+    return lines[:2] + lines[2 + WINDOW[0]:2 + WINDOW[1]]
+
+
+def as_bytes(value) -> bytes:
+    return value if isinstance(value, bytes) else value.encode('utf-8', 'surrogatepass')
+
+
+OUTCOMES = {'analysed': 0, 'refused': 0}     # printed after the long profile (-s)
+
+
+@pytest.fixture(scope='module', autouse=True)
+def report_outcomes():
+    yield
+    if PROFILE == 'long':
+        print(f'\ntracking files: {OUTCOMES["analysed"]} analysed (every number possible), '
+              f'{OUTCOMES["refused"]} refused with the reason')
+
+
+def analysed_plausibly_or_refused(path: Path) -> None:
+    """What `mantis analyze FILE` does: read, analyse. Only bad input may be refused (an
+    InputError naming it); what is accepted must be physically possible, checked here on its
+    own rather than trusting the analysis' own check."""
+    try:
+        trial = load_trial_input(path)
+        analysis, _, _ = analyse_trial(trial, {'d_t_mm': 23.0})
+    except InputError:
+        OUTCOMES['refused'] += 1
+        return
+    OUTCOMES['analysed'] += 1
+    s = analysis.summary()
+    assert 0.0 <= s['peak_tip_speed_mps'] <= 60.0, s
+    assert 15.0 <= s['L1_mm'] <= 25.0, s
+    assert 0.0 <= s['max_spring_energy_mJ'] <= 300.0, s
+    times = [t for t in s['phase_start_s'].values() if t == t] + [s['peak_tip_speed_s']]
+    assert times == sorted(times), s
+
+
+def write_tracking(tmp_path_factory, lines) -> Path:
+    path = tmp_path_factory.mktemp('fuzz_tracking') / 'trial_track.csv'
+    path.write_bytes(b'\n'.join(lines) + b'\n')
+    return path
+
+
+@fuzz
+@given(cells=st.lists(st.tuples(st.integers(0, WINDOW[1] - WINDOW[0] - 1), st.integers(0, 12),
+                                NUMERIC_CELLS), min_size=1, max_size=30),
+       garbage=st.none() | st.tuples(st.integers(0, WINDOW[1] - WINDOW[0] - 1),
+                                     st.integers(0, 12), CELL_VALUES))
+def test_a_tracking_file_with_any_cells_changed_is_analysed_plausibly_or_refused(
+        tmp_path_factory, tracking_lines, cells, garbage):
+    rows = [line.split(b',') for line in tracking_lines[2:]]
+    for row, column, value in cells + ([garbage] if garbage else []):
+        if column < len(rows[row]):
+            rows[row][column] = as_bytes(value)
+    path = write_tracking(tmp_path_factory, tracking_lines[:2] + [b','.join(r) for r in rows])
+    analysed_plausibly_or_refused(path)
+
+
+@fuzz
+@given(line=st.integers(0, 1), edit=st.sampled_from(['replace', 'drop', 'insert', 'cell']),
+       text=CELL_VALUES, column=st.integers(0, 12))
+def test_a_tracking_file_with_any_header_is_analysed_plausibly_or_refused(
+        tmp_path_factory, tracking_lines, line, edit, text, column):
+    header = list(tracking_lines[:2])
+    if edit == 'replace':
+        header[line] = as_bytes(text)
+    elif edit == 'drop':
+        del header[line]
+    elif edit == 'insert':
+        header.insert(line, as_bytes(text))
+    else:
+        cells = header[line].split(b',')
+        cells[min(column, len(cells) - 1)] = as_bytes(text)
+        header[line] = b','.join(cells)
+    path = write_tracking(tmp_path_factory, header + tracking_lines[2:])
+    analysed_plausibly_or_refused(path)

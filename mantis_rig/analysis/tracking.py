@@ -79,6 +79,18 @@ class MarkerTracks:
         for name, xy in self.markers_mm.items():
             if xy.shape != (self.n_frames, 2):
                 raise TrackFormatError(f'marker {name}: shape {xy.shape}, expected (n, 2)')
+            beyond = np.nonzero(np.abs(np.nan_to_num(xy)) > MAX_COORDINATE_MM)[0]
+            if beyond.size:
+                frame = int(beyond[0])
+                raise TrackFormatError(
+                    f'marker {name} in frame {frame} (t = {self.time_s[frame]:.6f} s) is at '
+                    f'{xy[frame].tolist()} mm, beyond any camera\'s field (|x|, |y| up to '
+                    f'{MAX_COORDINATE_MM:g} mm)')
+
+
+# No camera of the rig sees a marker 100 m from its origin: a bigger coordinate is a damaged
+# cell (read as a position, it would wreck every fit), not a position.
+MAX_COORDINATE_MM = 1e5
 
 
 def load_tracks(path: str | Path, frame_rate_hz: float | None = None,
@@ -89,9 +101,14 @@ def load_tracks(path: str | Path, frame_rate_hz: float | None = None,
     leaves out (``Record Rate: N/A``) or gets wrong (units that contradict the numbers).
     """
     path = Path(path)
-    if path.suffix.lower() in ('.xlsx', '.xlsm'):
-        return read_marker_xlsx(path, frame_rate_hz, length_unit)
-    return read_marker_csv(path, frame_rate_hz, length_unit)
+    try:
+        if path.suffix.lower() in ('.xlsx', '.xlsm'):
+            return read_marker_xlsx(path, frame_rate_hz, length_unit)
+        return read_marker_csv(path, frame_rate_hz, length_unit)
+    except TrackFormatError as exc:
+        if path.name in str(exc):
+            raise
+        raise TrackFormatError(f'{path}: {exc}') from exc
 
 
 def _read_text(path: Path) -> str:
