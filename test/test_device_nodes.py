@@ -26,7 +26,7 @@ from std_srvs.srv import Trigger
 from mantis_rig.hardware.interfaces import DeviceError
 from mantis_rig.hardware.world_port import WorldPort
 from mantis_rig.nodes.camera_node import CameraNode
-from mantis_rig.nodes.executors import Spinner
+from mantis_rig.nodes.executors import Spinner, light_executor
 from mantis_rig.nodes.loadcell_node import LoadcellNode
 from mantis_rig.nodes.sim_rig import SimRig
 from mantis_rig.nodes.stage_node import StageNode
@@ -48,14 +48,22 @@ POST_TRIGGER_S = 0.05
 
 class Rig:
     """A context on a ROS domain of its own (nodes of another Rig never hear these), an
-    executor spinning in a thread, and a client node that records topics."""
+    executor for device nodes spinning in a thread, and a client node that records topics.
+
+    The client spins on a SingleThreadedExecutor of its own: on a MultiThreadedExecutor its
+    subscriptions (one mutually exclusive callback group) kept the executor busy-waiting while
+    one of them ran (rclpy's known cost, issue 11), which starved the world of the GIL: a
+    pull at 0.5x advanced at 0.1x."""
 
     def __init__(self):
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=int(os.environ['ROS_DOMAIN_ID']))
         self.executor = MultiThreadedExecutor(num_threads=THREADS, context=self.context)
         self.nodes = []
-        self.client = self.add(Node('test_client', context=self.context))
+        self.client = Node('test_client', context=self.context)
+        self.nodes.append(self.client)
+        client_executor = light_executor(self.context)
+        client_executor.add_node(self.client)
         self.lock = threading.Lock()
         self.received = {}
         self.clients = {}
@@ -68,7 +76,7 @@ class Rig:
             self.received[topic] = []
             self.client.create_subscription(msg_type, topic, self._recorder(topic), 1000)
         self.velocity = self.client.create_publisher(Float64, '/stage/velocity_command', 10)
-        self.spinner = Spinner(self.executor, 'rig')
+        self.spinners = [Spinner(self.executor, 'rig'), Spinner(client_executor, 'client')]
 
     def add(self, node):
         self.nodes.append(node)
@@ -76,9 +84,14 @@ class Rig:
         return node
 
     def add_sim_rig(self, parameters):
-        """The simulated rig's world and device nodes (backend sim) on this rig's executor."""
+        """The simulated rig's world and device nodes (backend sim), spun as the stack spins
+        them: the world on a light executor, the device nodes on threads of their own."""
         sim_rig = SimRig(parameters, context=self.context)
-        sim_rig.add_to(self.executor, self.executor)
+        world_executor = light_executor(self.context)
+        device_executor = MultiThreadedExecutor(num_threads=THREADS, context=self.context)
+        sim_rig.add_to(world_executor, device_executor)
+        self.spinners += [Spinner(world_executor, 'sim-world'),
+                          Spinner(device_executor, 'sim-devices')]
         self.nodes.append(sim_rig)
         return sim_rig
 
@@ -127,7 +140,8 @@ class Rig:
 
     def close(self):
         """Stop spinning and destroy the nodes; what was received stays readable."""
-        self.spinner.stop(timeout_s=10.0)
+        for spinner in self.spinners:
+            spinner.stop(timeout_s=10.0)
         for node in reversed(self.nodes):
             node.destroy_node()
         rclpy.shutdown(context=self.context)
