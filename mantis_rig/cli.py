@@ -7,7 +7,7 @@ import sys
 from mantis_sim.errors import InputError
 from mantis_sim.model import SimulationError
 
-from . import cli_replay, cli_sim, cli_trial
+from . import cli_replay, cli_sim, cli_sweep, cli_trial
 
 USAGE_ERROR = 2
 
@@ -18,6 +18,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli_sim.add_commands(commands)
     cli_replay.add_commands(commands)
     cli_trial.add_commands(commands)
+    cli_sweep.add_commands(commands)
     return parser
 
 

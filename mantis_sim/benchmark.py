@@ -41,14 +41,18 @@ class Table:
     rows: list
 
 
-def _run(scene_name: str, solver: str, rtol: float):
-    scene = load_scene(scene_name, [f'integration.solver={solver}', f'integration.rtol={rtol!r}'])
+def _run_scene(scene_name: str, solver: str, rtol: float, overrides=()):
+    scene = load_scene(scene_name, [*overrides, f'integration.solver={solver}',
+                                    f'integration.rtol={rtol!r}'])
     return simulate(scene).metrics
 
 
-def accuracy_table(scene_name: str, repeats: int = 5) -> Table:
-    ref_a = _run(scene_name, 'DOP853', 1e-12)
-    ref_b = _run(scene_name, 'Radau', 1e-11)
+def accuracy_table(scene_name: str, repeats: int = 5, overrides=()) -> Table:
+    """``overrides``: scene parameters set first (``key=value``, as `mantis sim --set`)."""
+    def run(solver, rtol):
+        return _run_scene(scene_name, solver, rtol, overrides)
+    ref_a = run('DOP853', 1e-12)
+    ref_b = run('Radau', 1e-11)
     v_ref, t_ref = ref_a['peak_tip_speed_mps'], ref_a['phase_start_s']['IV']
     disagreement = abs(ref_b['peak_tip_speed_mps'] - v_ref) / v_ref
     disagreement_iv_us = abs(ref_b['phase_start_s']['IV'] - t_ref) * 1e6
@@ -57,7 +61,7 @@ def accuracy_table(scene_name: str, repeats: int = 5) -> Table:
         for rtol in TOLERANCES:
             if rtol < TIGHTEST.get(solver, 0.0):
                 continue
-            runs = [_run(scene_name, solver, rtol) for _ in range(repeats)]
+            runs = [run(solver, rtol) for _ in range(repeats)]
             m = runs[0]
             t_iv = m['phase_start_s']['IV']
             rows.append(Row(solver, rtol, statistics.median(r['wall_time_s'] for r in runs) * 1e3,
@@ -68,6 +72,13 @@ def accuracy_table(scene_name: str, repeats: int = 5) -> Table:
         row.pareto = not any(o.wall_ms < row.wall_ms and o.tip_speed_error < row.tip_speed_error
                              for o in rows)
     return Table(scene_name, v_ref, t_ref, disagreement, disagreement_iv_us, rows)
+
+
+def cheapest_row(table: Table, rel_error: float) -> Row | None:
+    """The fastest (solver, tolerance) whose peak tip speed is within ``rel_error`` of the
+    reference: "what accuracy costs in time", put to work. None if no row reaches it."""
+    reaching = [row for row in table.rows if row.tip_speed_error <= rel_error]
+    return min(reaching, key=lambda row: row.wall_ms) if reaching else None
 
 
 def format_table(table: Table, markdown: bool = False) -> str:

@@ -1,0 +1,111 @@
+"""`mantis sweep` and `mantis sweep-plot`: design studies over many simulated strikes."""
+from __future__ import annotations
+
+from pathlib import Path
+import sys
+
+
+def add_commands(commands) -> None:
+    sweep = commands.add_parser(
+        'sweep', help='simulate many designs of a scene into a Parquet table',
+        description='Vary scene parameters over a grid (--vary KEY=LO:HI:N, repeatable) or a '
+                    'Latin hypercube (--vary KEY=LO:HI ... --sample N) and simulate every '
+                    'design, on a local Dask cluster (default), an existing one (--scheduler) '
+                    'or this process (--workers 0). A rerun with the same --out computes only '
+                    'the designs the table lacks.')
+    sweep.add_argument('--scene', required=True, help='scene name or YAML path')
+    sweep.add_argument('--set', dest='overrides', action='append', default=[],
+                       metavar='KEY=VALUE', help='a fixed scene parameter for every design')
+    sweep.add_argument('--vary', action='append', default=[], required=True,
+                       metavar='KEY=LO:HI[:N]', help='a varied parameter and its range')
+    sweep.add_argument('--sample', type=int, metavar='N',
+                       help='N designs from a Latin hypercube over the ranges (else a grid)')
+    sweep.add_argument('--seed', type=int, default=0, help='seed of the Latin hypercube')
+    sweep.add_argument('--accuracy', type=float, metavar='REL',
+                       help='the cheapest solver and tolerance whose peak tip speed is within '
+                       'REL (relative) of the converged one on the scene (from the accuracy '
+                       'benchmark\'s work-precision data)')
+    sweep.add_argument('--solver', help='integrator (instead of --accuracy)')
+    sweep.add_argument('--rtol', type=float, help='relative tolerance (instead of --accuracy)')
+    sweep.add_argument('--out', type=Path, required=True, help='results table (.parquet)')
+    sweep.add_argument('--scheduler', metavar='tcp://HOST:PORT',
+                       help='an existing Dask scheduler (default: a local cluster)')
+    sweep.add_argument('--workers', type=int,
+                       help='local workers (default: one per core; 0: this process only)')
+    sweep.add_argument('--chunk-size', type=int, help='designs per task (default: by cost)')
+    sweep.add_argument('--quiet', action='store_true', help='no progress bar')
+    sweep.set_defaults(run=run_sweep_command)
+
+    plot = commands.add_parser(
+        'sweep-plot', help='figures of a sweep: heat maps, Pareto front, best designs',
+        description='Heat maps of a metric over two varied keys, the Pareto front of tip speed '
+                    'against peak tendon force and stored energy, and a table of the best '
+                    'designs under a force limit.')
+    plot.add_argument('table', type=Path, help='a table written by mantis sweep')
+    plot.add_argument('--out', type=Path, required=True, help='directory for the figures')
+    plot.add_argument('--metric', default='peak_tip_speed_mps', help='heat-map metric')
+    plot.add_argument('--force-limit', type=float, default=18.0, metavar='N',
+                      help='peak tendon force limit of the best-designs table (default 18 N)')
+    plot.add_argument('--top', type=int, default=10, help='rows of the best-designs table')
+    plot.set_defaults(run=run_sweep_plot)
+
+
+def run_sweep_command(args) -> int:
+    from mantis_sim.designs import check_ranges, grid, latin_hypercube, parse_range
+    from mantis_sim.scene import load_scene
+
+    from .sweep import SweepError, run_sweep
+    from .sweep_accuracy import choose_setting
+
+    if args.out.suffix != '.parquet':
+        raise SweepError(f'--out {args.out}: the table is Parquet: name a .parquet file')
+    if not args.out.resolve().parent.is_dir():
+        raise SweepError(f'--out {args.out}: no such directory {args.out.parent}')
+    if args.accuracy is not None and (args.solver or args.rtol is not None):
+        raise SweepError('--accuracy picks the solver and tolerance: give it, or --solver/'
+                         '--rtol, not both')
+    if args.workers is not None and args.workers < 0:
+        raise SweepError(f'--workers {args.workers}: must be >= 0')
+    if args.workers is not None and args.scheduler:
+        raise SweepError('--workers sizes the local cluster; --scheduler uses an existing one')
+    if args.chunk_size is not None and args.chunk_size < 1:
+        raise SweepError(f'--chunk-size {args.chunk_size}: must be >= 1')
+    ranges = [parse_range(text, need_n=args.sample is None) for text in args.vary]
+    overrides = list(args.overrides)
+    base = load_scene(args.scene, overrides)          # unknown scene or bad --set: refused
+    check_ranges(base, ranges)
+    estimate_s = 0.01
+    if args.accuracy is not None:
+        setting = choose_setting(args.scene, overrides, args.accuracy)
+        print(f'mantis sweep: --accuracy {args.accuracy:g}: {setting}', file=sys.stderr)
+        overrides += setting.overrides()
+        estimate_s = setting.wall_ms * 1e-3
+    else:
+        if args.solver:
+            overrides.append(f'integration.solver={args.solver}')
+        if args.rtol is not None:
+            overrides.append(f'integration.rtol={args.rtol!r}')
+        load_scene(args.scene, overrides)             # a bad solver or tolerance: refused
+    designs = (latin_hypercube(ranges, args.sample, args.seed) if args.sample is not None
+               else grid(ranges))
+    summary = run_sweep(args.scene, overrides, designs, args.out, scheduler=args.scheduler,
+                        workers=args.workers, chunk_size=args.chunk_size,
+                        estimated_strike_s=estimate_s, progress=not args.quiet)
+    print(summary, file=sys.stderr)
+    print(f'mantis sweep: table {args.out}', file=sys.stderr)
+    return 0
+
+
+def run_sweep_plot(args) -> int:
+    from .sweep import read_table
+    from .sweep_plots import plot_sweep
+
+    if not args.table.exists():
+        from .sweep import SweepError
+        raise SweepError(f'{args.table}: no such file')
+    rows = read_table(args.table)
+    written = plot_sweep(rows, args.out, metric=args.metric, force_limit_n=args.force_limit,
+                         top=args.top)
+    for path in written:
+        print(path)
+    return 0

@@ -1,0 +1,238 @@
+"""`mantis sweep`: many simulated strikes, one row per design, in a Parquet table.
+
+The designs (mantis_sim.designs) go out in chunks, so that scheduling costs little against a
+strike of a few ms: to a dask.distributed LocalCluster on this machine's cores (embedded, no
+server to start; it listens on 127.0.0.1 only), to an existing cluster (``scheduler``
+``tcp://HOST:PORT``), or, with ``workers=0``, through this process alone. A design is computed
+the same way wherever it runs, so the three give the same table to the last digit.
+
+Resumable: the table is rewritten (to a temporary file, then renamed) every
+``CHECKPOINT_S`` of wall time and at the end; a rerun with the same ``out`` computes only the
+designs it lacks. A worker lost in mid-sweep costs nothing but time: dask reruns its chunks.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import os
+from pathlib import Path
+import socket
+import sys
+import time
+
+from mantis_sim.designs import ID_COLUMN, STATUS_OK, run_chunk
+from mantis_sim.errors import InputError
+
+CHECKPOINT_S = 10.0
+CHUNK_TARGET_S = 0.5            # wall time of one chunk: scheduling costs ~ms per task
+CONNECT_TIMEOUT_S = 10.0
+
+
+class SweepError(InputError):
+    """The sweep cannot start as asked (names the problem)."""
+
+
+@dataclass
+class SweepSummary:
+    designs: int                 # in the study
+    computed: int                # this run
+    reused: int                  # from an earlier run's table
+    ok: int
+    wall_s: float                # computing, from a ready cluster to the last row
+    strikes_s: float             # sum of the designs' own computing times (this run)
+    workers: int
+    where: str
+
+    @property
+    def overhead_share(self) -> float:
+        """Share of the workers' wall time not spent on the designs themselves (scheduling,
+        transfer, the table)."""
+        busy = self.wall_s * max(self.workers, 1)
+        return 1.0 - self.strikes_s / busy if busy > 0 else float('nan')
+
+    def __str__(self) -> str:
+        rate = self.computed / self.wall_s if self.wall_s > 0 else float('nan')
+        return (f'{self.designs} designs: {self.computed} computed, {self.reused} from the '
+                f'earlier table; {self.ok} struck, {self.designs - self.ok} without a strike '
+                f'or failed (see status, reason); {self.wall_s:.1f} s wall on {self.where} '
+                f'({self.workers} worker(s)): {rate:.0f} strikes/s; the designs themselves '
+                f'{self.strikes_s:.1f} s, scheduling and transfer '
+                f'{100 * self.overhead_share:.0f} % of the workers\' time')
+
+
+def read_table(path: Path) -> list[dict]:
+    """The rows of an earlier run (empty if there is none)."""
+    import pyarrow.parquet as pq
+    if not path.exists():
+        return []
+    try:
+        return pq.read_table(path).to_pylist()
+    except Exception as exc:      # noqa: BLE001 - pyarrow raises several kinds: name the file
+        raise SweepError(f'{path}: exists but is not a readable Parquet table of a sweep '
+                         f'({type(exc).__name__}: {exc}); move it away or give another '
+                         f'--out') from None
+
+
+def write_table(rows: list[dict], path: Path) -> None:
+    """All rows, in design order, replacing the file atomically."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    columns = {}
+    for row in rows:                      # every column any row has, in first-seen order
+        for key in row:
+            columns.setdefault(key, None)
+    table = pa.Table.from_pylist([{k: row.get(k) for k in columns} for row in rows])
+    tmp = path.with_name(path.name + '.partial')
+    pq.write_table(table, tmp)
+    os.replace(tmp, path)
+
+
+def chunk_size_for(estimated_strike_s: float, designs: int, workers: int) -> int:
+    """Enough designs per chunk for ~CHUNK_TARGET_S of work, yet at least 4 chunks a worker
+    (so that the load balances and a lost worker loses little)."""
+    by_time = max(1, int(CHUNK_TARGET_S / max(estimated_strike_s, 1e-4)))
+    by_balance = max(1, designs // (4 * max(workers, 1)))
+    return max(1, min(by_time, by_balance))
+
+
+class Progress:
+    """One line on stderr, rewritten: designs done of all, rate, time left."""
+
+    def __init__(self, total: int, already: int = 0, stream=sys.stderr):
+        self.total, self.done, self.stream = total, already, stream
+        self.start = time.monotonic()
+        self.first = already
+        self._last = 0.0
+
+    def advance(self, n: int) -> None:
+        self.done += n
+        now = time.monotonic()
+        if now - self._last >= 0.2 or self.done >= self.total:
+            self._last = now
+            rate = (self.done - self.first) / max(now - self.start, 1e-9)
+            left = (self.total - self.done) / rate if rate > 0 else float('inf')
+            width = 30
+            filled = int(width * self.done / max(self.total, 1))
+            self.stream.write(f'\r[{"#" * filled}{"." * (width - filled)}] {self.done}/'
+                              f'{self.total} designs, {rate:.0f}/s, {left:.0f} s left ')
+            self.stream.flush()
+
+    def close(self) -> None:
+        self.stream.write('\n')
+        self.stream.flush()
+
+
+def run_sweep(scene_name: str, overrides: list, designs: list[dict], out: Path, *,
+              scheduler: str | None = None, workers: int | None = None,
+              chunk_size: int | None = None, estimated_strike_s: float = 0.01,
+              progress: bool = True) -> SweepSummary:
+    """Compute the designs ``out`` lacks and write the table (module docstring)."""
+    from mantis_sim.designs import design_id
+    out = Path(out)
+    earlier = {row[ID_COLUMN]: row for row in read_table(out)}
+    ids = [design_id(d) for d in designs]
+    todo = [(i, d) for i, (i_d, d) in enumerate(zip(ids, designs)) if i_d not in earlier]
+    rows = {i: earlier[i_d] for i, i_d in enumerate(ids) if i_d in earlier}
+    started = [time.monotonic()]           # of the computing (after a cluster is up)
+    bar = Progress(len(designs), len(rows)) if progress else None
+    strikes_s = 0.0
+
+    def finished(chunk_rows, positions):
+        nonlocal strikes_s
+        for pos, row in zip(positions, chunk_rows):
+            rows[pos] = row
+            strikes_s += float(row.get('design_time_s') or 0.0)
+        if bar:
+            bar.advance(len(chunk_rows))
+
+    last_checkpoint = [time.monotonic()]
+
+    def checkpoint(force=False):
+        if force or time.monotonic() - last_checkpoint[0] >= CHECKPOINT_S:
+            write_table([rows[i] for i in sorted(rows)], out)
+            last_checkpoint[0] = time.monotonic()
+
+    try:
+        if workers == 0 and scheduler is None:
+            where, n_workers = 'this process', 1
+            size = chunk_size or chunk_size_for(estimated_strike_s, len(todo), 1)
+            for chunk in _chunks(todo, size):
+                finished(run_chunk(scene_name, overrides, [d for _, d in chunk]),
+                         [i for i, _ in chunk])
+                checkpoint()
+        else:
+            client, cluster, where = _connect(scheduler, workers)
+            started[0] = time.monotonic()
+            try:
+                n_workers = max(1, len(client.scheduler_info().get('workers', {})))
+                size = chunk_size or chunk_size_for(estimated_strike_s, len(todo), n_workers)
+                chunks = list(_chunks(todo, size))
+                _run_on_cluster(client, scene_name, overrides, chunks, finished, checkpoint)
+            finally:
+                client.close()
+                if cluster is not None:
+                    cluster.close()
+    finally:
+        if bar:
+            bar.close()
+        if len(rows) > len(earlier):
+            checkpoint(force=True)
+    ordered = [rows[i] for i in sorted(rows)]
+    return SweepSummary(designs=len(designs), computed=len(todo), reused=len(designs) - len(todo),
+                        ok=sum(r.get('status') == STATUS_OK for r in ordered),
+                        wall_s=time.monotonic() - started[0], strikes_s=strikes_s,
+                        workers=n_workers, where=where)
+
+
+def _chunks(items: list, size: int):
+    for start in range(0, len(items), size):
+        yield items[start:start + size]
+
+
+def _connect(scheduler: str | None, workers: int | None):
+    """(client, cluster or None, description) of the cluster to use."""
+    from dask.distributed import Client, LocalCluster
+    if scheduler is not None:
+        _check_reachable(scheduler)
+        try:
+            client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise SweepError(f'--scheduler {scheduler}: cannot reach the Dask scheduler '
+                             f'({type(exc).__name__}: {exc})') from None
+        return client, None, f'the Dask cluster at {scheduler}'
+    n = workers or os.cpu_count() or 1
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                           host='127.0.0.1', dashboard_address=None)
+    return Client(cluster), cluster, 'a local Dask cluster'
+
+
+def _check_reachable(scheduler: str) -> None:
+    """Refuse at once a scheduler address that is malformed or where nothing listens (dask's
+    own client retries for its whole timeout first)."""
+    from urllib.parse import urlsplit
+    parts = urlsplit(scheduler)
+    try:
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        host = port = None
+    if parts.scheme != 'tcp' or not host or not port:
+        raise SweepError(f'--scheduler {scheduler}: expected tcp://HOST:PORT')
+    try:
+        socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
+    except OSError as exc:
+        raise SweepError(f'--scheduler {scheduler}: cannot reach the Dask scheduler '
+                         f'({exc.strerror or exc})') from None
+
+
+def _run_on_cluster(client, scene_name, overrides, chunks, finished, checkpoint) -> None:
+    from dask.distributed import as_completed
+    futures = {}
+    for chunk in chunks:
+        future = client.submit(run_chunk, scene_name, overrides, [d for _, d in chunk],
+                               pure=False)
+        futures[future] = [i for i, _ in chunk]
+    for future in as_completed(futures):
+        finished(future.result(), futures.pop(future))
+        checkpoint()
+
+
+__all__ = ['Progress', 'SweepError', 'SweepSummary', 'read_table', 'run_sweep', 'write_table']

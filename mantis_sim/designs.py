@@ -1,0 +1,169 @@
+"""Designs for a study: ranges of scene parameters, as a grid or a Latin hypercube, and the
+simulated strike of each design as one row of results.
+
+A design is a scene with some of its parameters set (``{'geometry.d_t_mm': 21.0, ...}``). Its
+row holds every input, the metrics of `mantis sim --json` (nested ones flattened:
+``phase_start_s.IV``), the solver and tolerance, the integration's wall time (``wall_time_s``,
+as `mantis sim` reports it) and the whole design's (``design_time_s``: the scene, the
+simulation and its metrics), and a status:
+``ok``, ``no strike`` (the pull never released the arm) or ``failed`` (the simulation raised),
+with the reason. Nothing here knows where the designs run (mantis_rig.sweep does).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import hashlib
+import itertools
+import json
+import math
+import time
+
+import numpy as np
+
+from .errors import InputError
+from .model import SimulationError
+from .parameters import ParameterError
+from .results import JSON_KEYS, simulate
+from .scene import Scene, load_scene
+
+STATUS_OK, STATUS_NO_STRIKE, STATUS_FAILED = 'ok', 'no strike', 'failed'
+ID_COLUMN = 'design_id'
+METRIC_KEYS = tuple(k for k in JSON_KEYS if k not in ('effects', 'solver', 'rtol',
+                                                      'wall_time_s'))
+EXTRA_METRICS = ('peak_time_s', 'peak_arm_speed_radps', 'peak_body_speed_in_strike_radps',
+                 'arm_kinetic_energy_share_at_peak', 'tendon_work_phase_IV_mJ')
+
+
+class DesignError(InputError):
+    """A range or a design that cannot be simulated (names the key and why)."""
+
+
+@dataclass(frozen=True)
+class Range:
+    key: str
+    low: float
+    high: float
+    n: int | None = None          # grid points; None with --sample
+
+    def values(self) -> np.ndarray:
+        return np.linspace(self.low, self.high, self.n)
+
+
+def parse_range(text: str, need_n: bool = True) -> Range:
+    """``KEY=LO:HI:N`` (or ``KEY=LO:HI`` for a Latin hypercube)."""
+    key, sep, spec = text.partition('=')
+    parts = spec.split(':')
+    if not sep or not key.strip() or len(parts) not in (2, 3):
+        raise DesignError(f'--vary {text!r}: expected KEY=LO:HI:N (for a grid) or KEY=LO:HI '
+                          f'(with --sample), e.g. geometry.d_t_mm=19:25:7')
+    try:
+        low, high = float(parts[0]), float(parts[1])
+        n = int(parts[2]) if len(parts) == 3 else None
+    except ValueError:
+        raise DesignError(f'--vary {text!r}: LO and HI must be numbers and N a whole '
+                          f'number') from None
+    if not (math.isfinite(low) and math.isfinite(high) and low <= high):
+        raise DesignError(f'--vary {text!r}: need finite LO <= HI')
+    if need_n and (n is None or n < 1):
+        raise DesignError(f'--vary {text!r}: a grid needs N >= 1 points (KEY=LO:HI:N)')
+    if n is not None and n < 1:
+        raise DesignError(f'--vary {text!r}: N must be >= 1')
+    return Range(key.strip(), low, high, n)
+
+
+def check_ranges(scene: Scene, ranges: list[Range]) -> None:
+    """Refuse, before any work, a key the scene does not have, a non-numeric one, a key given
+    twice, or an end of a range outside the parameter's valid range (DesignError)."""
+    seen = set()
+    for r in ranges:
+        if r.key in seen:
+            raise DesignError(f'--vary {r.key}: given twice')
+        seen.add(r.key)
+        for end in (r.low, r.high):
+            try:
+                varied = scene.with_overrides([f'{r.key}={end!r}'])
+            except ParameterError as exc:
+                raise DesignError(f'--vary {r.key}={r.low:g}:{r.high:g}: {exc}') from None
+            if not isinstance(_lookup(varied, r.key), (int, float)):
+                raise DesignError(f'--vary {r.key}: not a numeric parameter')
+
+
+def _lookup(scene: Scene, key: str):
+    section, _, name = key.partition('.')
+    return getattr(getattr(scene, section), name)
+
+
+def grid(ranges: list[Range]) -> list[dict]:
+    return [dict(zip([r.key for r in ranges], (float(v) for v in combo)))
+            for combo in itertools.product(*(r.values() for r in ranges))]
+
+
+def latin_hypercube(ranges: list[Range], n: int, seed: int = 0) -> list[dict]:
+    """n designs, each range cut into n strata and every stratum used once (scipy's qmc)."""
+    from scipy.stats import qmc
+    if n < 1:
+        raise DesignError(f'--sample {n}: need at least one design')
+    unit = qmc.LatinHypercube(d=len(ranges), seed=seed).random(n)
+    lows = np.array([r.low for r in ranges])
+    spans = np.array([r.high - r.low for r in ranges])
+    return [dict(zip([r.key for r in ranges], (float(v) for v in lows + spans * u)))
+            for u in unit]
+
+
+def design_id(values: dict) -> str:
+    """Stable across runs and machines: the sorted inputs, floats in their exact repr."""
+    text = json.dumps({k: repr(float(v)) for k, v in sorted(values.items())})
+    return hashlib.sha1(text.encode()).hexdigest()[:16]
+
+
+def run_design(scene: Scene, values: dict) -> dict:
+    """The row of one design (module docstring). Never raises for a design that fails."""
+    row = {ID_COLUMN: design_id(values), **values}
+    started = time.perf_counter()
+    try:
+        result = simulate(scene.with_overrides([f'{k}={v!r}' for k, v in values.items()]))
+    except (SimulationError, ParameterError, ArithmeticError, ValueError) as exc:
+        row.update(status=STATUS_FAILED, reason=f'{type(exc).__name__}: {exc}',
+                   wall_time_s=time.perf_counter() - started,
+                   design_time_s=time.perf_counter() - started)
+        return row
+    metrics = result.metrics
+    row.update(_flatten({k: metrics[k] for k in METRIC_KEYS + EXTRA_METRICS}))
+    row.update(solver=metrics['solver'], rtol=float(metrics['rtol']),
+               wall_time_s=float(metrics['wall_time_s']))
+    if metrics['strike_reached']:
+        row.update(status=STATUS_OK, reason='')
+    else:
+        row.update(status=STATUS_NO_STRIKE,
+                   reason='the arm never struck: the pull did not release it')
+    row['design_time_s'] = time.perf_counter() - started
+    return row
+
+
+def run_chunk(scene_name: str, overrides: list, chunk: list[dict]) -> list[dict]:
+    """Rows of several designs of one scene: what a worker runs (the scene loaded once).
+
+    BLAS runs on one thread here: the implicit solvers' LU factorisations give other last
+    digits with two OpenBLAS threads than with one (Radau at rtol 1e-7: 28.25404482109 against
+    ...112 m/s), and a Dask worker runs with one; this way a design's row is the same in this
+    process, on a LocalCluster and on any cluster."""
+    from threadpoolctl import threadpool_limits
+    scene = load_scene(scene_name, overrides)
+    with threadpool_limits(limits=1, user_api='blas'):
+        return [run_design(scene, values) for values in chunk]
+
+
+def _flatten(metrics: dict) -> dict:
+    out = {}
+    for key, value in metrics.items():
+        if isinstance(value, dict):
+            for sub, v in value.items():
+                out[f'{key}.{sub}'] = None if v is None else float(v)
+        else:
+            out[key] = None if value is None else float(value)
+    return out
+
+
+__all__ = ['DesignError', 'Range', 'check_ranges', 'design_id', 'grid', 'latin_hypercube',
+           'parse_range', 'run_chunk', 'run_design', 'ID_COLUMN', 'STATUS_OK',
+           'STATUS_NO_STRIKE', 'STATUS_FAILED']
