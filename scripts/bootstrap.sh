@@ -32,6 +32,20 @@ if [ "$(cat "$stamp" 2>/dev/null || true)" != "$wanted" ]; then
   echo "$wanted" > "$stamp"
 fi
 if [ "${1:-}" = "--test" ]; then
+  # The ROS install path's own venv: colcon and the runtime dependencies, no mantis_rig (the
+  # test builds and installs it with colcon).
+  if [ ! -x .venv-colcon/bin/python ]; then
+    echo "bootstrap: creating .venv-colcon with $python_bin (colcon build test)" >&2
+    "$python_bin" -m venv .venv-colcon
+  fi
+  colcon_stamp=.venv-colcon/.mantis-colcon-installed
+  colcon_wanted="$(cat requirements.txt requirements-colcon.txt | sha256sum | cut -d' ' -f1)"
+  if [ "$(cat "$colcon_stamp" 2>/dev/null || true)" != "$colcon_wanted" ]; then
+    echo "bootstrap: installing colcon and the runtime dependencies into .venv-colcon" >&2
+    .venv-colcon/bin/python -m pip install --quiet --disable-pip-version-check \
+      -r requirements.txt -r requirements-colcon.txt
+    echo "$colcon_wanted" > "$colcon_stamp"
+  fi
   test_stamp=.venv/.mantis-test-installed
   test_wanted="$(sha256sum requirements-test.txt | cut -d' ' -f1)"
   if [ "$(cat "$test_stamp" 2>/dev/null || true)" != "$test_wanted" ]; then
