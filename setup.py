@@ -7,12 +7,13 @@ PACKAGE = 'mantis_rig'
 
 
 def config_data_files():
-    """Install config/ under share/mantis_rig/config, keeping its sub-folders."""
+    """Install config/ (scenes, the Foxglove layout) under share/mantis_rig/config, keeping its
+    sub-folders."""
     entries = []
     for folder, _, files in os.walk('config'):
-        yaml_files = [os.path.join(folder, f) for f in files if f.endswith(('.yaml', '.yml'))]
-        if yaml_files:
-            entries.append((os.path.join('share', PACKAGE, folder), yaml_files))
+        data = [os.path.join(folder, f) for f in files if f.endswith(('.yaml', '.yml', '.json'))]
+        if data:
+            entries.append((os.path.join('share', PACKAGE, folder), data))
     return entries
 
 

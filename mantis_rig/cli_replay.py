@@ -39,7 +39,13 @@ def run_replay(args) -> int:
     rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node('mantis_replay')
     stop = threading.Event()
+    relay = None
     try:
+        if args.live:
+            from .live import LiveRelay
+            relay = LiveRelay(args.live)
+            print(f'live view: {relay.url} (Foxglove: Open connection, Foxglove WebSocket)',
+                  flush=True)
         player = BagPlayer(node, args.bag, rate=args.rate, loop=args.loop, topics=args.topics,
                            clock_hz=args.clock, realtime=args.realtime,
                            time_jumps=args.time_jumps)
@@ -70,6 +76,8 @@ def run_replay(args) -> int:
         return stop_requested.exit_status
     finally:
         signals.shield()
+        if relay is not None:
+            relay.close()
         node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
@@ -353,6 +361,9 @@ def add_commands(commands) -> None:
     replay.add_argument('bag', help='bag directory or .mcap file')
     replay.add_argument('--rate', type=float, default=1.0, help='speed factor (default 1)')
     replay.add_argument('--loop', action='store_true', help='start again at the end')
+    replay.add_argument('--live', metavar='[HOST:]PORT',
+                        help='also serve the replayed topics to Foxglove over WebSocket '
+                        '(foxglove-sdk; host 127.0.0.1 unless given)')
     replay.add_argument('--time-jumps', choices=('refuse', 'skip'), default='refuse',
                         help="a message whose log time lies outside the span the bag's "
                         'metadata.yaml states (a damaged time stamp): refuse the replay, naming '

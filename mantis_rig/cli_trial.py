@@ -58,6 +58,10 @@ def _stack_arguments(parser) -> None:
     parser.add_argument('--seed', type=int, default=0, help='sensor noise seed (sim backend)')
     parser.add_argument('--log-dir', type=Path,
                         help='with --processes multi: write each node\'s output here')
+    parser.add_argument('--live', metavar='[HOST:]PORT',
+                        help='serve the trial\'s topics live to Foxglove over WebSocket '
+                        '(foxglove-sdk; host 127.0.0.1 unless given; layout: '
+                        'config/foxglove/trial_layout.json)')
 
 
 def _typed(key: str, text: str):
@@ -155,6 +159,7 @@ def _trial(config, args, signals) -> int:
     from .nodes.trial_client import TrialClient
     from .trial_summary import format_summary, summarize
 
+    relay = _live_relay(args)
     stack = Stack(config, log_dir=args.log_dir)
     signals.emergency_stop = stack.emergency_stop
     client = TrialClient()
@@ -162,6 +167,8 @@ def _trial(config, args, signals) -> int:
     run = _TrialRun()
     try:
         stack.start()
+        if relay is not None and stack.rig is not None:
+            relay.follow_clock(stack.rig.clock)
         run.follow(client, stack, args.timeout)
     except StopRequested as stop:
         run.reason = stop.reason
@@ -176,6 +183,8 @@ def _trial(config, args, signals) -> int:
             run.bag = _supervisor_bag(stack)
         stack.stop(reason=run.reason or 'trial ended', signum=_signum(signals))
         client.destroy_node()
+        if relay is not None:
+            relay.close()
     if signals.first is not None:
         where = f'log closed: {run.bag}' if run.bag else 'no trial had started'
         say(f'mantis trial: {signals.first.reason}: stage stopped; {where}')
@@ -185,6 +194,17 @@ def _trial(config, args, signals) -> int:
         return 1
     print(format_summary(summarize(run.bag), with_path=False))
     return 0 if run.final == 'done' else 1
+
+
+def _live_relay(args):
+    """The live view, if asked for (LiveError, before anything starts, if it cannot be)."""
+    if not args.live:
+        return None
+    from .live import LiveRelay
+    relay = LiveRelay(args.live)
+    print(f'live view: {relay.url} (Foxglove: Open connection, Foxglove WebSocket; layout '
+          f'config/foxglove/trial_layout.json)', flush=True)
+    return relay
 
 
 class _TrialRun:
@@ -247,11 +267,14 @@ def _bringup(config, args, signals) -> int:
     from .nodes.bringup import Stack
     from .nodes.stopping import StopRequested, say
 
+    relay = _live_relay(args)
     stack = Stack(config, log_dir=args.log_dir)
     signals.emergency_stop = stack.emergency_stop
     status = 0
     try:
         stack.start()
+        if relay is not None and stack.rig is not None:
+            relay.follow_clock(stack.rig.clock)
         names = ', '.join(config.node_names())
         print(f'mantis bringup: {names} up ({config.processes} process'
               f'{"es" if config.processes == "multi" else ""}); call /supervisor/start_trial; '
@@ -269,6 +292,8 @@ def _bringup(config, args, signals) -> int:
         signals.shield()
         reason = signals.first.reason if signals.first else 'a node process ended'
         stack.stop(reason=reason, signum=_signum(signals))
+        if relay is not None:
+            relay.close()
     if signals.first is not None:
         say(f'mantis bringup: {signals.first.reason}: stage stopped, nodes ended')
         return signals.first.exit_status

@@ -155,7 +155,7 @@ ROSDEP_KEYS = {'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'yaml': 'pyth
                'matplotlib': 'python3-matplotlib', 'serial': 'python3-serial',
                'openpyxl': 'python3-openpyxl'}
 PYPI_ONLY = {'mcap', 'mcap_ros2', 'rosbags', 'thorlabs_apt_protocol', 'nidaqmx', 'dask',
-             'distributed', 'pyarrow', 'threadpoolctl'}
+             'distributed', 'pyarrow', 'threadpoolctl', 'foxglove'}
 
 
 def imported_top_levels() -> set:
@@ -180,7 +180,7 @@ def test_package_xml_is_format_3_and_declares_what_the_code_imports():
     missing = []
     for name in sorted(imported_top_levels()):
         if name in PYPI_ONLY:
-            if name.replace('_', '-') not in comment and name not in comment:
+            if not any(n in comment for n in (name, name.replace('_', '-'), f'{name}-sdk')):
                 missing.append(f'{name} (PyPI: name it in package.xml\'s comment)')
         elif ROSDEP_KEYS.get(name, name) not in exec_depends:
             missing.append(ROSDEP_KEYS.get(name, name))

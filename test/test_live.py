@@ -1,0 +1,181 @@
+"""The live view (issue 12): `mantis trial --live` serves the trial's topics over the Foxglove
+WebSocket protocol. A real client (the `websockets` package) connects during a simulated trial,
+sees the channels with their ros2msg schemas, subscribes to the force and stage topics and
+decodes the CDR it gets, with the advertised schemas (mcap-ros2-support), into the bag's values.
+A second client that subscribes to everything and never reads does not stall the trial: the bag's
+force stream stays gap-free. A port in use or a bad host is refused before the trial starts."""
+import json
+import os
+from pathlib import Path
+import socket
+import struct
+import subprocess
+import sys
+import threading
+import time
+
+from mcap.records import Schema
+from mcap_ros2.decoder import DecoderFactory
+import pytest
+from websockets.exceptions import ConnectionClosed
+from websockets.sync.client import connect
+
+from mantis_rig.recording import BagReader
+from mantis_rig.recording.force_block import force_block_from_msg
+
+REPO = Path(__file__).resolve().parents[1]
+SUBPROTOCOL = 'foxglove.sdk.v1'
+MESSAGE_DATA = 0x01
+WANTED = ('/loadcell/force_block', '/stage/joint_state')
+
+pytestmark = pytest.mark.timeout(300)
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(('127.0.0.1', 0))
+        return s.getsockname()[1]
+
+
+def open_client(url: str, timeout_s: float = 60.0):
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            return connect(url, subprotocols=[SUBPROTOCOL], open_timeout=5, max_size=None)
+        except OSError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.1)
+
+
+def channels_of(ws) -> dict:
+    """topic -> advertised channel, from the server's first messages."""
+    channels = {}
+    while not all(topic in channels for topic in WANTED):
+        message = json.loads(ws.recv(timeout=30))
+        if message['op'] == 'advertise':
+            channels.update({c['topic']: c for c in message['channels']})
+    return channels
+
+
+def subscribe(ws, channels: dict, topics) -> dict:
+    """subscription id -> channel."""
+    subscriptions = {i: channels[t] for i, t in enumerate(topics, start=1)}
+    ws.send(json.dumps({'op': 'subscribe', 'subscriptions': [
+        {'id': i, 'channelId': c['id']} for i, c in subscriptions.items()]}))
+    return subscriptions
+
+
+def test_a_client_sees_the_trial_live_and_a_stalled_one_does_not_slow_it(tmp_path):
+    port = free_port()
+    out = tmp_path / 'trials'
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'mantis_rig.cli', 'trial', '--out', str(out), '--live',
+         f'127.0.0.1:{port}'], cwd=REPO, env=os.environ.copy(), stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True)
+    url = f'ws://127.0.0.1:{port}'
+    received = []
+    stalled = []
+    try:
+        reader = open_client(url)
+        channels = channels_of(reader)
+        subscriptions = subscribe(reader, channels, WANTED)
+        staller = open_client(url)                    # subscribes to everything, never reads
+        subscribe(staller, channels_of(staller), list(channels))
+        stalled.append(staller)
+        try:
+            while True:
+                frame = reader.recv(timeout=120)
+                if isinstance(frame, bytes) and frame[0] == MESSAGE_DATA:
+                    sub_id, _ = struct.unpack_from('<IQ', frame, 1)
+                    received.append((subscriptions[sub_id], frame[13:]))
+        except (ConnectionClosed, TimeoutError):
+            pass                                      # the trial is over: the server stopped
+        stdout, stderr = process.communicate(timeout=120)
+    finally:
+        for ws in stalled:
+            threading.Thread(target=ws.close, daemon=True).start()
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 0, stdout + stderr
+    assert f'live view: ws://127.0.0.1:{port}' in stdout
+
+    for topic in WANTED:
+        channel = channels[topic]
+        assert channel['encoding'] == 'cdr' and channel['schemaEncoding'] == 'ros2msg'
+    assert channels['/loadcell/force_block']['schemaName'] == 'std_msgs/msg/Float64MultiArray'
+    assert 'MSG: std_msgs/MultiArrayLayout' in channels['/loadcell/force_block']['schema']
+
+    factory = DecoderFactory()
+    decoders = {t: factory.decoder_for('cdr', Schema(id=c['id'], name=c['schemaName'],
+                                                     encoding='ros2msg',
+                                                     data=c['schema'].encode()))
+                for t, c in channels.items() if t in WANTED}     # (cached by schema id)
+    live_force = {}
+    live_stage = {}
+    for channel, payload in received:
+        message = decoders[channel['topic']](payload)
+        if channel['topic'] == '/loadcell/force_block':
+            live_force[tuple(message.data[:2])] = list(message.data)
+        else:
+            stamp = (message.header.stamp.sec, message.header.stamp.nanosec)
+            live_stage[stamp] = (list(message.position), list(message.velocity))
+
+    bag = next(p for p in out.iterdir() if p.is_dir())
+    reader_bag = BagReader(bag)
+    bag_force, bag_stage = {}, {}
+    for topic, _, _, msg in reader_bag.messages(list(WANTED)):
+        if topic == '/loadcell/force_block':
+            bag_force[tuple(msg.data[:2])] = list(msg.data)
+        else:
+            bag_stage[(msg.header.stamp.sec, msg.header.stamp.nanosec)] = (
+                list(msg.position), list(msg.velocity))
+    # the bag closes with the trial; the stream (and the live view) go on a moment longer
+    during = {k: v for k, v in live_force.items() if k[0] <= max(bag_force)[0]}
+    assert len(during) > 50 and {k: bag_force.get(k) for k in during} == during
+    during = {k: v for k, v in live_stage.items() if k <= max(bag_stage)}
+    assert len(during) > 50 and {k: bag_stage.get(k) for k in during} == during
+
+    # What Foxglove needs to open the bag itself: the ros2 profile, CDR messages, a ros2msg
+    # schema with the type's full definition for every channel; every message decodes with
+    # the bag's own schemas, as Foxglove decodes it (mcap-ros2-support).
+    from mcap.reader import make_reader
+
+    from mantis_rig.recording.message_definition import full_message_definition
+    for mcap_path in bag.glob('*.mcap'):
+        with open(mcap_path, 'rb') as f:
+            mcap = make_reader(f, decoder_factories=[DecoderFactory()])
+            assert mcap.get_header().profile == 'ros2'
+            summary = mcap.get_summary()
+            for channel in summary.channels.values():
+                schema = summary.schemas[channel.schema_id]
+                assert channel.message_encoding == 'cdr', channel.topic
+                assert schema.encoding == 'ros2msg', channel.topic
+                assert schema.data.decode() == full_message_definition(schema.name)
+            decoded = sum(1 for _ in mcap.iter_decoded_messages())
+        assert decoded == sum(s.message_count for s in [summary.statistics])
+
+    blocks = sorted((force_block_from_msg(m) for t, _, _, m in
+                     reader_bag.messages(['/loadcell/force_block'])), key=lambda b: b.t0_ns)
+    for before, after in zip(blocks, blocks[1:]):
+        assert after.t0_ns == before.t0_ns + before.forces_n.size * before.period_ns
+
+
+@pytest.mark.parametrize('address, why', [
+    ('127.0.0.1:{busy}', 'Address already in use'),
+    ('no.such.host.invalid:8765', 'cannot serve on no.such.host.invalid:8765'),
+    ('127.0.0.1:99999', 'a port of 0-65535'),
+    ('eighty', 'expected [HOST:]PORT'),
+])
+def test_a_bad_live_address_is_refused_before_the_trial(tmp_path, address, why):
+    with socket.socket() as busy:
+        busy.bind(('127.0.0.1', 0))
+        busy.listen()
+        result = subprocess.run(
+            [sys.executable, '-m', 'mantis_rig.cli', 'trial', '--out', str(tmp_path / 'out'),
+             '--live', address.format(busy=busy.getsockname()[1])], cwd=REPO,
+            env=os.environ.copy(), capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert why in result.stderr and result.stderr.count('\n') == 1, result.stderr
+    assert 'Traceback' not in result.stderr
+    assert not (tmp_path / 'out').exists() or not any((tmp_path / 'out').iterdir())
