@@ -69,7 +69,8 @@ class Mechanism:
         self.body_inertia_about_a = self.m1 * r1_sq + body.inertia_g_mm2
         self._arm_about_b = self.m2 * r2_sq + arm.inertia_g_mm2
         self._m11_const = self.body_inertia_about_a + self.m2 * self.L1 ** 2 + self._arm_about_b
-        self._added = _AddedMass(scene) if scene.has('added_mass') else None
+        self._added = (_AddedMass(scene) if scene.has('added_mass') else
+                       _PublishedAddedMass(scene) if scene.has('published_added_mass') else None)
         if self._added is not None:
             self.body_inertia_about_a += self._added.body_about_a
 
@@ -182,4 +183,47 @@ class _AddedMass:
         a22 = m * k2
         da11 = m * (2 * L1 * s * k1 - 2 * L1 * L1 * c * s * k0)
         da12 = -m * L1 * s * k1
+        return a11, a12, a22, da11, da12
+
+
+PUBLISHED_LENGTH_SCALE = 1.8      # the authors' calibration of their added-mass lengths
+
+
+class _PublishedAddedMass:
+    """Entrained fluid in the form of the authors' published simulation (their Fig. S12 run), to
+    reproduce it: elliptic plates whose added masses act at the centres of mass. The arm blade
+    (length l from the point L5 at the tendon attachment's angle to the tip, width w = S_a / l)
+    adds m_n = rho pi w l^2 / 4 to the arm COM's motion normal to the arm, m_n / 64 along it
+    (aspect ratio 1/8) and rho pi w l^4 (1 - 1/64)^2 / 128 of inertia; the body plate (L1 by
+    S_b / L1, with half again below it) adds 3/2 rho pi w L1^2 / 4 to its COM's motion and
+    9/8 rho pi w L1^4 / 128 of inertia. Masses are scaled by 1.8, inertias by 1.8^3, as in
+    theirs. The velocity terms are the consistent ones of this M(theta3)."""
+
+    def __init__(self, scene: Scene):
+        g, rho, s = scene.geometry, scene.medium.density_g_per_mm3, PUBLISHED_LENGTH_SCALE
+        beta = math.radians(g.beta_deg)
+        blade = math.hypot(g.L3_mm - g.L5_mm * math.cos(beta), g.L5_mm * math.sin(beta))
+        width = scene.arm.blade_area_mm2 / blade
+        normal = rho * math.pi * width * blade ** 2 / 4.0
+        self.m_normal = normal * s
+        self.m_along = normal / 64.0 * s
+        self.arm_inertia = (rho * math.pi * width * blade ** 4 * (1 - 1 / 64) ** 2 / 128.0
+                            * s ** 3)
+        body_width = scene.body.area_mm2 / g.L1_mm
+        body_mass = 1.5 * rho * math.pi * body_width * g.L1_mm ** 2 / 4.0 * s
+        body_inertia = 1.125 * rho * math.pi * body_width * g.L1_mm ** 4 / 128.0 * s ** 3
+        self.body_about_a = body_mass * scene.body.com_y_mm ** 2 + body_inertia
+        self.L1 = g.L1_mm
+        self.x2, self.y2 = scene.arm.com_x_mm, scene.arm.com_y_mm
+
+    def matrix(self, c: float, s: float):
+        """(a11, a12, a22) and d/dtheta3 of a11, a12, as _AddedMass.matrix."""
+        L1, x2, y2 = self.L1, self.x2, self.y2
+        jn1, jt1 = y2 - L1 * c, L1 * s + x2          # COM velocity rows: (jn1, -y2), (jt1, -x2)
+        mn, mt, inertia = self.m_normal, self.m_along, self.arm_inertia
+        a11 = mn * jn1 * jn1 + mt * jt1 * jt1 + inertia + self.body_about_a
+        a12 = -mn * y2 * jn1 - mt * x2 * jt1 - inertia
+        a22 = mn * y2 * y2 + mt * x2 * x2 + inertia
+        da11 = 2 * mn * jn1 * L1 * s + 2 * mt * jt1 * L1 * c
+        da12 = -mn * y2 * L1 * s - mt * x2 * L1 * c
         return a11, a12, a22, da11, da12

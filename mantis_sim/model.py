@@ -16,12 +16,20 @@ import math
 from typing import NamedTuple
 
 from .drive import make_drive
-from .forces import FluidDrag, Gravity, HingeStiffness, JointDamping, TorsionSpring
+from .forces import (
+    FluidDrag,
+    Gravity,
+    HingeStiffness,
+    JointDamping,
+    PublishedArmAirLoad,
+    TorsionSpring,
+)
 from .mechanism import Mechanism
 from .scene import Scene
 
 MECHANICAL_EFFECTS = ('gravity', 'joint_damping', 'hinge_stiffness', 'fluid_drag', 'added_mass',
-                      'tendon_slack', 'contact_restitution', 'stage_profile')
+                      'tendon_slack', 'contact_restitution', 'stage_profile',
+                      'published_arm_air_load', 'published_added_mass')
 
 
 class SimulationError(RuntimeError):
@@ -56,7 +64,10 @@ class Model:
         if scene.has('gravity'):
             self.terms.append(Gravity(self.mech))
         if scene.has('fluid_drag'):
-            self.terms.append(FluidDrag(self.mech, scene))
+            self.terms.append(FluidDrag(self.mech, scene,
+                                        blade=not scene.has('published_arm_air_load')))
+        if scene.has('published_arm_air_load'):
+            self.terms.append(PublishedArmAirLoad(self.mech, scene))
         self.effects = tuple(e for e in MECHANICAL_EFFECTS if scene.has(e))
         self.rigid = scene.tendon.model == 'rigid'
         self.unilateral = scene.has('tendon_slack')

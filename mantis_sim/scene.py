@@ -42,6 +42,12 @@ EFFECTS = {
     'stage_profile': 'stage acceleration ramp and servo following error',
     'loadcell_dynamics': 'amplifier bandwidth, noise and ADC quantisation of the force signal',
     'camera_sampling': 'pixel quantisation of the tracked markers',
+    'published_arm_air_load': 'the arm blade\'s air load in the authors\' published form (off-axis '
+                              'centre of pressure, C_D = 1.9 + 1.5 cos 2a, one-sided lift), '
+                              'replacing fluid_drag\'s blade term: to reproduce their simulation',
+    'published_added_mass': 'entrained fluid in the authors\' published form (elliptic plates at '
+                            'the centres of mass, lengths scaled by 1.8), instead of added_mass: '
+                            'to reproduce their simulation',
 }
 
 
@@ -130,7 +136,11 @@ def _check_consistency(scene: Scene) -> None:
     if g.L5_mm >= g.L3_mm:
         raise ParameterError(f'geometry.L5_mm = {g.L5_mm} must be below geometry.L3_mm = '
                              f'{g.L3_mm} (the blade lies between L5 and the tip)')
-    needs_fluid = scene.effects & {'fluid_drag', 'added_mass'}
+    needs_fluid = scene.effects & {'fluid_drag', 'added_mass', 'published_arm_air_load',
+                                   'published_added_mass'}
+    if {'added_mass', 'published_added_mass'} <= scene.effects:
+        raise ParameterError('effects added_mass and published_added_mass are two forms of the '
+                             'same fluid inertia: enable one')
     if needs_fluid and scene.medium.density_g_per_mm3 <= 0:
         raise ParameterError(f'effects {", ".join(sorted(needs_fluid))} need '
                              f'medium.density_g_per_mm3 > 0 (got 0)')

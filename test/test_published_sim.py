@@ -1,0 +1,76 @@
+"""The published_s12 scene against the authors' published simulation (issue 14): their
+parameters and their forms of the arm's air load and of the added mass in air, over the strike.
+Their tendon-force saturation at 17 N is not modelled; what it leaves is recorded as strict
+xfails (the issue's goals) beside the bounds reached today."""
+from conftest import data_file
+import numpy as np
+import pytest
+import scipy.io as sio
+
+from mantis_sim.results import simulate
+from mantis_sim.scene import load_scene
+
+L1_MM, L3_MM = 19.0, 18.66
+T_SWITCH_LAG_MS = 0.19          # their T_switch is logged this long after the arm leaves contact
+
+
+@pytest.fixture(scope='module')
+def published():
+    m = sio.loadmat(data_file('published_sims/figS12_air_23mm.mat'), squeeze_me=True,
+                    struct_as_record=False)
+    t, th3, d1, d3 = m['t'], m['th3'], m['dth1'], m['dth3']
+    tip = np.sqrt(L1_MM ** 2 * d1 ** 2 + L3_MM ** 2 * (d1 - d3) ** 2
+                  - 2 * L1_MM * L3_MM * d1 * (d1 - d3) * np.cos(th3))
+    return dict(t=t, F=m['F'], tip=tip, arm=np.abs(d3).max() * 1e3,
+                unlatch=float(m['T_switch']) - T_SWITCH_LAG_MS,
+                iv=float(t[np.argmin(m['th1'])]), peak=float(t[np.argmax(tip)]))
+
+
+@pytest.fixture(scope='module')
+def ours():
+    return simulate(load_scene('published_s12', ['integration.rtol=1e-9']))
+
+
+def test_the_events_are_within_0_2_ms(published, ours):
+    m = ours.metrics
+    assert abs(m['phase_start_s']['II'] * 1e3 - published['unlatch']) < 0.2
+    assert abs(m['phase_start_s']['IV'] * 1e3 - published['iv']) < 0.2
+    assert abs(m['peak_time_s'] * 1e3 - published['peak']) < 0.2
+
+
+def test_the_tendon_force_matches_until_the_strike(published, ours):
+    """Within 0.03 N through loading, unlatching and phase III (to 1591 ms); in the last 1.5 ms
+    before their force saturates, the strike's tension spike differs by up to 0.6 N."""
+    t = published['t']
+    loading = t <= 1591.0
+    force = np.interp(t[loading], ours.trajectory.t_ms, ours.trajectory.tendon_force_N)
+    assert np.abs(force - published['F'][loading]).max() < 0.03
+
+
+def test_peak_speeds_are_within_2_5_percent(published, ours):
+    tip = ours.metrics['peak_tip_speed_mps'] / published['tip'].max() - 1
+    arm = ours.metrics['peak_arm_speed_radps'] / published['arm'] - 1
+    assert 0 < tip < 0.025 and 0 < arm < 0.015, (tip, arm)
+
+
+@pytest.mark.xfail(strict=True, reason='issue 14 goal not met: their tendon force saturates at '
+                   '17 N (not modelled); the peak tip speed is 2.3 % high, the arm 1.1 %')
+def test_peak_speeds_are_within_1_percent(published, ours):
+    assert abs(ours.metrics['peak_tip_speed_mps'] / published['tip'].max() - 1) < 0.01
+    assert abs(ours.metrics['peak_arm_speed_radps'] / published['arm'] - 1) < 0.01
+
+
+@pytest.mark.xfail(strict=True, reason='issue 14 goal not met: without their saturation the '
+                   'tension spike before it differs by up to 0.6 N')
+def test_the_tendon_force_is_within_0_2_n_up_to_its_saturation(published, ours):
+    t, F = published['t'], published['F']
+    before = t < t[np.argmax(F >= 17.0 - 1e-9)]
+    force = np.interp(t[before], ours.trajectory.t_ms, ours.trajectory.tendon_force_N)
+    assert np.abs(force - F[before]).max() < 0.2
+
+
+def test_the_published_terms_are_opt_in(ours):
+    """No other scene changes: air_23mm keeps the consistent forms."""
+    assert {'published_arm_air_load', 'published_added_mass'} <= set(ours.metrics['effects'])
+    assert not {'published_arm_air_load', 'published_added_mass'} & set(
+        simulate(load_scene('air_23mm')).metrics['effects'])
