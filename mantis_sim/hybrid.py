@@ -44,6 +44,7 @@ STATE_SCALE = (1.0, 1.0, 1.0, 1.0, 100.0, 100.0)   # rad, rad, rad/ms, rad/ms, m
 class Mode:
     latched: bool
     taut: bool
+    saturated: bool = False       # a taut rigid tendon yielding at its saturation tension
 
 
 @dataclass
@@ -56,6 +57,7 @@ class Segment:
     t: np.ndarray
     states: np.ndarray            # columns: th1, th3, w1, w3, W_drive, E_dissipated
     dense: object = None          # callable t -> full state row, if dense output was asked
+    saturated: bool = False
 
 
 @dataclass
@@ -87,10 +89,10 @@ class HybridSimulator:
 
     # --- mode systems ---------------------------------------------------------------------------
     def _constrained(self, mode: Mode) -> bool:
-        return mode.latched and mode.taut and self.model.rigid
+        return mode.latched and mode.taut and self.model.rigid and not mode.saturated
 
     def _dynamics(self, mode: Mode, t, y) -> Dynamics:
-        key = (mode.latched, mode.taut, t, *y)
+        key = (mode.latched, mode.taut, mode.saturated, t, *y)
         if key == self._cache_key:
             return self._cache_value
         m = self.model
@@ -105,7 +107,7 @@ class HybridSimulator:
         elif mode.latched:
             d = m.latched_free(t, y[0], y[1], mode.taut)
         else:
-            d = m.unlatched(t, y[0], y[1], y[2], y[3], mode.taut)
+            d = m.unlatched(t, y[0], y[1], y[2], y[3], mode.taut, mode.saturated)
         self._cache_key, self._cache_value = key, d
         return d
 
@@ -163,8 +165,13 @@ class HybridSimulator:
                 th3 = m.contact_angle if mode.latched else y[1]
                 return m.mech.tendon_length(y[0], th3) - m.free_length(t)[0]
 
-            if m.rigid and mode.taut:
+            if mode.saturated:
+                event('resume', -1, stretch)
+            elif m.rigid and mode.taut:
                 event('slack', -1, lambda t, y: dyn(mode, t, y).tension_N)
+                if m.saturation_N is not None and not mode.latched:
+                    limit = m.saturation_N
+                    event('saturate', 1, lambda t, y: dyn(mode, t, y).tension_N - limit)
             elif (m.rigid and not mode.latched and start_stretch > -0.5 * self.separation
                     and start_rate > -self.separation / GRAZING_TIME_MS):
                 # Grazing: the tendon is at zero stretch and stretch rate but would have to
@@ -366,6 +373,17 @@ class HybridSimulator:
                 phase = self._advance(phase, 'II', t)
             elif name == 'slack':
                 mode.taut = False
+            elif name == 'saturate':
+                mode.saturated = True
+            elif name == 'resume':
+                # back to its unstretched length: locked again, or slack if still shortening
+                mode.saturated = False
+                tg = self.model.mech.tendon(s[0], s[1])
+                rate = tg.d1 * s[2] + tg.d3 * s[3] - self.model.free_length(t)[1]
+                if rate < 0.0 and self.model.unilateral:
+                    mode.taut = False
+                else:
+                    s = self._retension(mode, t, s)
             elif name == 'retension':
                 s = self._retension(mode, t, s) if self.model.rigid else s
                 mode.taut = True
@@ -403,14 +421,14 @@ class HybridSimulator:
             raise SimulationError(f'integration failed at t = {sol.t[-1]:.6f} ms in phase '
                                   f'{phase}: {sol.message}')
         self.run_data.solver_steps += len(sol.t) - 1
-        frozen = Mode(mode.latched, mode.taut)
+        frozen = Mode(mode.latched, mode.taut, mode.saturated)
         states = np.array([self._unpack(frozen, ti, yi)
                            for ti, yi in zip(sol.t.tolist(), sol.y.T.tolist())])
         dense = None
         if self.dense and sol.sol is not None:
             dense = _DenseSegment(self, frozen, sol.sol)
         self.run_data.segments.append(Segment(phase, mode.latched, mode.taut, sol.t, states,
-                                              dense))
+                                              dense, mode.saturated))
         name = None
         if sol.status == 1:
             fired = [ev.__name__ for ev, te in zip(events, sol.t_events) if len(te)]
@@ -423,7 +441,8 @@ class HybridSimulator:
                 + self.model.potential_energy(s[0], s[1], t))
 
     def dynamics_at(self, segment: Segment, t, s) -> Dynamics:
-        return self._state_dynamics(Mode(segment.latched, segment.taut), t, s)
+        return self._state_dynamics(Mode(segment.latched, segment.taut, segment.saturated), t,
+                                    s)
 
     def _state_dynamics(self, mode: Mode, t, s) -> Dynamics:
         """Dynamics at a full state s. A latched arm on a taut rigid tendon has its theta1

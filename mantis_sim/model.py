@@ -29,7 +29,8 @@ from .scene import Scene
 
 MECHANICAL_EFFECTS = ('gravity', 'joint_damping', 'hinge_stiffness', 'fluid_drag', 'added_mass',
                       'tendon_slack', 'contact_restitution', 'stage_profile',
-                      'published_arm_air_load', 'published_added_mass')
+                      'published_arm_air_load', 'published_added_mass',
+                      'tendon_force_saturation')
 
 
 class SimulationError(RuntimeError):
@@ -71,6 +72,8 @@ class Model:
         self.effects = tuple(e for e in MECHANICAL_EFFECTS if scene.has(e))
         self.rigid = scene.tendon.model == 'rigid'
         self.unilateral = scene.has('tendon_slack')
+        self.saturation_N = (scene.tendon.saturation_N
+                             if self.rigid and scene.has('tendon_force_saturation') else None)
         self.k_t = scene.tendon.stiffness_N_per_mm
         self.c_t = scene.tendon.damping_N_ms_per_mm
         self.restitution = scene.contact.restitution if scene.has('contact_restitution') else 0.0
@@ -154,8 +157,10 @@ class Model:
         return Dynamics(th1, th3, w1, 0.0, a1, 0.0, tension, contact,
                         -tension * self.free_length(t)[1], loss)
 
-    def unlatched(self, t, th1, th3, w1, w3, taut: bool) -> Dynamics:
-        """Arm free of the body; rigid taut tendon as a constraint, else a force (or none)."""
+    def unlatched(self, t, th1, th3, w1, w3, taut: bool, saturated: bool = False) -> Dynamics:
+        """Arm free of the body; rigid taut tendon as a constraint, else a force (or none).
+        ``saturated``: the rigid tendon yields at its saturation tension (it stretches at that
+        constant force; what it takes from the drive's work is booked as loss)."""
         self.rhs_evals += 1
         m = self.mech.mass(th3)
         q1, q3, loss = self.applied(th1, th3, w1, w3)
@@ -163,7 +168,14 @@ class Model:
         f1, f3 = q1 - c1, q3 - c3
         tension = 0.0
         l_free, l_free_dot, l_free_ddot = self.free_length(t)
-        if self.rigid and taut:
+        if saturated:
+            tg = self.mech.tendon(th1, th3)
+            tension = self.saturation_N
+            f1 -= tension * tg.d1
+            f3 -= tension * tg.d3
+            loss += tension * (tg.d1 * w1 + tg.d3 * w3 - l_free_dot)
+            a1, a3 = m.solve(f1, f3)
+        elif self.rigid and taut:
             tg = self.mech.tendon(th1, th3)
             rate_error = tg.d1 * w1 + tg.d3 * w3 - l_free_dot
             curvature = tg.d11 * w1 * w1 + 2 * tg.d13 * w1 * w3 + tg.d33 * w3 * w3

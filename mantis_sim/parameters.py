@@ -98,6 +98,8 @@ class Tendon:
     stiffness_N_per_mm: float = param(50.0, 'N/mm', 'Kevlar + load cell stiffness (compliant)',
                                       0.0, 1e7, lo_open=True)
     damping_N_ms_per_mm: float = param(0.0, 'N ms/mm', 'tendon damping (compliant)', 0.0, 1e4)
+    saturation_N: float = param(17.0, 'N', 'tension at which the rigid tendon yields (effect '
+                                'tendon_force_saturation)', 0.0, 1e4, lo_open=True)
 
 
 @dataclass(frozen=True)

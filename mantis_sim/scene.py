@@ -48,6 +48,8 @@ EFFECTS = {
     'published_added_mass': 'entrained fluid in the authors\' published form (elliptic plates at '
                             'the centres of mass, lengths scaled by 1.8), instead of added_mass: '
                             'to reproduce their simulation',
+    'tendon_force_saturation': 'the rigid tendon yields at tendon.saturation_N: it stretches at '
+                               'that tension and locks again when it has shortened back',
 }
 
 

@@ -1,7 +1,7 @@
 """The published_s12 scene against the authors' published simulation (issue 14): their
-parameters and their forms of the arm's air load and of the added mass in air, over the strike.
-Their tendon-force saturation at 17 N is not modelled; what it leaves is recorded as strict
-xfails (the issue's goals) beside the bounds reached today."""
+parameters, their forms of the arm's air load and of the added mass in air, and a tendon that
+yields at 17 N, over the strike. What is left is recorded as strict xfails (the issue's goals)
+beside the bounds reached today."""
 from conftest import data_file
 import numpy as np
 import pytest
@@ -40,28 +40,32 @@ def test_the_events_are_within_0_2_ms(published, ours):
 
 def test_the_tendon_force_matches_until_the_strike(published, ours):
     """Within 0.03 N through loading, unlatching and phase III (to 1591 ms); in the last 1.5 ms
-    before their force saturates, the strike's tension spike differs by up to 0.6 N."""
+    before the force saturates, the strike's tension spike differs by up to 0.6 N (ours reaches
+    17 N 0.05 ms earlier)."""
     t = published['t']
     loading = t <= 1591.0
     force = np.interp(t[loading], ours.trajectory.t_ms, ours.trajectory.tendon_force_N)
     assert np.abs(force - published['F'][loading]).max() < 0.03
 
 
-def test_peak_speeds_are_within_2_5_percent(published, ours):
+def test_peak_speeds_are_within_1_2_percent_and_the_force_saturates(published, ours):
     tip = ours.metrics['peak_tip_speed_mps'] / published['tip'].max() - 1
     arm = ours.metrics['peak_arm_speed_radps'] / published['arm'] - 1
-    assert 0 < tip < 0.025 and 0 < arm < 0.015, (tip, arm)
+    assert 0 < tip < 0.012 and 0 < arm < 0.012, (tip, arm)
+    assert ours.metrics['peak_tendon_force_N'] == pytest.approx(17.0, abs=1e-9)
+    assert 'saturate' in [name for name, _ in ours.metrics['events']]
 
 
-@pytest.mark.xfail(strict=True, reason='issue 14 goal not met: their tendon force saturates at '
-                   '17 N (not modelled); the peak tip speed is 2.3 % high, the arm 1.1 %')
+@pytest.mark.xfail(strict=True, reason='issue 14 goal not met: the peak tip speed is 1.07 % high, '
+                   'the arm 1.14 % (their theta3 shift by the contact angle in A(theta3), not '
+                   'copied, is one candidate)')
 def test_peak_speeds_are_within_1_percent(published, ours):
     assert abs(ours.metrics['peak_tip_speed_mps'] / published['tip'].max() - 1) < 0.01
     assert abs(ours.metrics['peak_arm_speed_radps'] / published['arm'] - 1) < 0.01
 
 
-@pytest.mark.xfail(strict=True, reason='issue 14 goal not met: without their saturation the '
-                   'tension spike before it differs by up to 0.6 N')
+@pytest.mark.xfail(strict=True, reason='issue 14 goal not met: the tension spike before the '
+                   'saturation reaches 17 N 0.05 ms early: up to 0.6 N apart')
 def test_the_tendon_force_is_within_0_2_n_up_to_its_saturation(published, ours):
     t, F = published['t'], published['F']
     before = t < t[np.argmax(F >= 17.0 - 1e-9)]
@@ -71,6 +75,7 @@ def test_the_tendon_force_is_within_0_2_n_up_to_its_saturation(published, ours):
 
 def test_the_published_terms_are_opt_in(ours):
     """No other scene changes: air_23mm keeps the consistent forms."""
-    assert {'published_arm_air_load', 'published_added_mass'} <= set(ours.metrics['effects'])
-    assert not {'published_arm_air_load', 'published_added_mass'} & set(
-        simulate(load_scene('air_23mm')).metrics['effects'])
+    published_terms = {'published_arm_air_load', 'published_added_mass',
+                       'tendon_force_saturation'}
+    assert published_terms <= set(ours.metrics['effects'])
+    assert not published_terms & set(simulate(load_scene('air_23mm')).metrics['effects'])
