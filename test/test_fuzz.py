@@ -304,3 +304,70 @@ def test_a_tracking_file_with_any_header_is_analysed_plausibly_or_refused(
         header[line] = b','.join(cells)
     path = write_tracking(tmp_path_factory, header + tracking_lines[2:])
     analysed_plausibly_or_refused(path)
+
+
+# ----------------------------------------------------- a bag of a real strike, analysed
+@pytest.fixture(scope='module')
+def strike_bag(tmp_path_factory, tracking_lines):
+    """The real export's frames around the strike, imported as `mantis import-tracking` does
+    and rewritten uncompressed in 4 kB chunks, so that records can be changed in place."""
+    from mantis_rig.analysis import load_tracks
+    from mantis_rig.analysis.tracking_import import write_tracking_bag
+    work = tmp_path_factory.mktemp('fuzz_strike')
+    csv = write_tracking(tmp_path_factory, tracking_lines)
+    write_tracking_bag(load_tracks(csv), work / 'imported', conditions={'d_t_mm': 23.0})
+    source = BagReader(work / 'imported')
+    path = work / 'strike'
+    with BagWriter(path, sync_period_s=0, compression='none', chunk_size_bytes=4096) as bag:
+        for topic, info in source.topics.items():
+            bag.add_topic(topic, info.type_name)
+        for name, record in source.metadata_records:
+            bag.add_metadata(name, record)
+        for topic, _, t_ns, msg in source.messages():
+            bag.write(topic, msg, t_ns)
+    return path
+
+
+def bag_analysed_plausibly_or_refused(bag: Path) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore', TruncatedBagWarning)
+        analysed_plausibly_or_refused(bag)
+
+
+def test_the_strike_bag_itself_is_analysed(strike_bag):
+    trial = load_trial_input(strike_bag)
+    analysis, _, _ = analyse_trial(trial, {})
+    assert 20.0 < analysis.summary()['peak_tip_speed_mps'] < 30.0
+
+
+@fuzz
+@given(edits=st.lists(st.tuples(st.floats(0.0, 1.0), st.integers(0, 255)), min_size=1,
+                      max_size=8))
+def test_a_strike_bag_with_changed_bytes_is_analysed_plausibly_or_refused(strike_bag, edits):
+    def edit(data):
+        for where, value in edits:
+            data[min(int(len(data) * where), len(data) - 1)] = value
+        return data
+    bag = damaged_copy(strike_bag, edit)
+    bag_analysed_plausibly_or_refused(bag)
+    shutil.rmtree(bag.parent)
+
+
+@fuzz
+@given(chunk=st.integers(0, 10_000), where=st.floats(0.0, 1.0), value=st.integers(0, 255),
+       span=st.integers(1, 64))
+def test_a_strike_bag_changed_behind_a_valid_crc_is_analysed_plausibly_or_refused(
+        strike_bag, chunk, where, value, span):
+    """Marker and force payloads changed where no CRC sees it: every number the analysis
+    then reports must still be one the robot can produce."""
+    def edit(data):
+        spans = chunk_records(data)
+        start, length, crc_at = spans[chunk % len(spans)]
+        first = start + int(where * (length - 1))
+        data[first:min(first + span, start + length)] = bytes([value]) * min(
+            span, start + length - first)
+        struct.pack_into('<I', data, crc_at, zlib.crc32(bytes(data[start:start + length])))
+        return data
+    bag = damaged_copy(strike_bag, edit)
+    bag_analysed_plausibly_or_refused(bag)
+    shutil.rmtree(bag.parent)
