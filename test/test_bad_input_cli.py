@@ -1,0 +1,121 @@
+"""Issue 16's damaged files through the command line, one case per kind: each is refused with
+exit 2 and one line on stderr that names the file and the problem, no traceback, and the input
+file's bytes are unchanged. (Signals: test_replay.py; nothing to replay or recover, exit 1:
+test_replay.py, test_recording.py.)"""
+import gzip
+import hashlib
+from pathlib import Path
+import zipfile
+
+from conftest import data_file
+import pytest
+import yaml
+
+from mantis_rig.cli import main as cli_main
+
+PAIR_CSV = 'real_trials/air_23mm_19kfps_pair_track.csv'
+WINDOW = (9000, 11300)             # frames around the strike
+
+
+def digest(path: Path) -> str:
+    paths = sorted(p for p in path.rglob('*') if p.is_file()) if path.is_dir() else [path]
+    return hashlib.sha256(b''.join(p.read_bytes() for p in paths)).hexdigest()
+
+
+def refused(capsys, args, path: Path, why: str) -> None:
+    before = digest(path)
+    code = cli_main([str(a) for a in args])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert err.count('\n') == 1 and 'Traceback' not in err, err
+    assert why in err, err
+    assert str(path.name) in err, err
+    assert digest(path) == before, 'the input was changed'
+
+
+@pytest.fixture(scope='module')
+def window_csv(tmp_path_factory) -> bytes:
+    lines = data_file(PAIR_CSV).read_bytes().splitlines()
+    return b'\n'.join(lines[:2] + lines[2 + WINDOW[0]:2 + WINDOW[1]]) + b'\n'
+
+
+@pytest.fixture(scope='module')
+def strike_bag(tmp_path_factory, window_csv):
+    work = tmp_path_factory.mktemp('bad_input')
+    csv = work / 'strike_track.csv'
+    csv.write_bytes(window_csv)
+    bag = work / 'strike_bag'
+    assert cli_main(['import-tracking', str(csv), '--out', str(bag), '--d-t-mm', '23']) == 0
+    return bag
+
+
+@pytest.mark.parametrize('name, content, why', [
+    ('zero.xlsx', b'', 'not a readable .xlsx workbook'),
+    ('not_a_zip.xlsx', b'PK\x03\x04 this is not a zip', 'not'),
+    ('no_sheet.xlsx', 'no_sheet', 'sheet'),
+])
+def test_a_damaged_spreadsheet(capsys, tmp_path, name, content, why):
+    path = tmp_path / name
+    if content == 'no_sheet':
+        with zipfile.ZipFile(path, 'w') as z:
+            z.writestr('[Content_Types].xml', '<Types/>')
+    else:
+        path.write_bytes(content)
+    for command in ('analyze', 'import-tracking'):
+        extra = ['--out', tmp_path / f'out_{command}'] if command == 'import-tracking' else []
+        refused(capsys, [command, path, *extra], path, why)
+
+
+def test_tracking_files_with_a_bad_header_a_cut_gzip_or_an_infinite_time(capsys, tmp_path,
+                                                                         window_csv):
+    header = tmp_path / 'latin1_track.csv'
+    header.write_bytes(b'Frame,Time,Feature 1 (mb1)\xe9,,' + window_csv.split(b',', 5)[-1])
+    refused(capsys, ['analyze', header], header, 'not')
+    cut = tmp_path / 'cut_track.csv.gz'
+    cut.write_bytes(gzip.compress(window_csv)[:5000])
+    refused(capsys, ['analyze', cut], cut, 'cut_track.csv.gz')
+    lines = window_csv.splitlines()
+    cells = lines[-1].split(b',')
+    cells[1] = b'inf'
+    infinite = tmp_path / 'inf_track.csv'
+    infinite.write_bytes(b'\n'.join(lines[:-1] + [b','.join(cells)]) + b'\n')
+    for command in ('analyze', 'import-tracking'):
+        extra = ['--out', tmp_path / f'inf_{command}'] if command == 'import-tracking' else []
+        refused(capsys, [command, infinite, *extra], infinite, 'Time is not a number')
+
+
+def test_marker_positions_a_thousand_times_too_large_are_refused(capsys, tmp_path, window_csv):
+    lines = window_csv.splitlines()
+    rows = []
+    for line in lines[2:]:
+        cells = line.split(b',')
+        rows.append(b','.join(cells[:2] + [b'%r' % (float(c) * 1000) if c not in (b'-1', b'')
+                                           else c for c in cells[2:]]))
+    big = tmp_path / 'thousand_track.csv'
+    big.write_bytes(b'\n'.join(lines[:2] + rows) + b'\n')
+    refused(capsys, ['analyze', big, '--d-t-mm', '23'], big, 'L1 =')
+
+
+def test_a_null_in_metadata_yaml(capsys, tmp_path, strike_bag):
+    import shutil
+    bag = tmp_path / 'null_bag'
+    shutil.copytree(strike_bag, bag)
+    meta = yaml.safe_load((bag / 'metadata.yaml').read_text())
+    meta['rosbag2_bagfile_information']['relative_file_paths'] = [None]
+    (bag / 'metadata.yaml').write_text(yaml.safe_dump(meta))
+    refused(capsys, ['analyze', bag], bag, 'relative_file_paths')
+    refused(capsys, ['recover', bag, '-o', tmp_path / 'recovered'], bag, 'relative_file_paths')
+    refused(capsys, ['replay', bag], bag, 'relative_file_paths')
+
+
+def test_a_scene_with_a_huge_integer_non_utf8_bytes_or_cut_short(capsys, tmp_path):
+    scene = yaml.safe_load(Path(data_file('../../config/scenes/air_23mm.yaml')).read_text())
+    huge = tmp_path / 'huge.yaml'
+    huge.write_text(yaml.safe_dump({**scene, 'geometry': {'d_t_mm': 10 ** 400}}))
+    refused(capsys, ['sim', '--scene', huge], huge, 'd_t_mm')
+    latin = tmp_path / 'latin.yaml'
+    latin.write_bytes(yaml.safe_dump(scene).encode() + b'# caf\xe9\n')
+    refused(capsys, ['sim', '--scene', latin], latin, 'not UTF-8')
+    cut = tmp_path / 'cut.yaml'                 # cut after its first lines: still YAML
+    cut.write_text(yaml.safe_dump({'name': 'cut', 'effects': []}))
+    refused(capsys, ['sim', '--scene', cut], cut, 'missing required key')
