@@ -242,8 +242,8 @@ OUTCOMES = {'analysed': 0, 'refused': 0}     # printed after the long profile (-
 def report_outcomes():
     yield
     if PROFILE == 'long':
-        print(f'\ntracking files: {OUTCOMES["analysed"]} analysed (every number possible), '
-              f'{OUTCOMES["refused"]} refused with the reason')
+        print(f'\ntracking files and strike bags: {OUTCOMES["analysed"]} analysed (every '
+              f'number possible), {OUTCOMES["refused"]} refused with the reason')
 
 
 def analysed_plausibly_or_refused(path: Path) -> None:
