@@ -1,7 +1,8 @@
-"""Issue 16's damaged files through the command line, one case per kind: each is refused with
-exit 2 and one line on stderr that names the file and the problem, no traceback, and the input
-file's bytes are unchanged. (Signals: test_replay.py; nothing to replay or recover, exit 1:
-test_replay.py, test_recording.py.)"""
+"""Issue 16's damaged files through the command line, one case per kind (points 1, 2, 4, 5, 7,
+8 and 9 of the issue): each is refused with exit 2 and one line on stderr that names the file
+and the problem, no traceback, and the input file's bytes are unchanged. (Point 3, signals:
+test_replay.py; point 6, a bag's conditions: test_import_analyze.py; nothing to replay or
+recover, exit 1: test_replay.py, test_recording.py.)"""
 import gzip
 import hashlib
 from pathlib import Path
@@ -119,3 +120,44 @@ def test_a_scene_with_a_huge_integer_non_utf8_bytes_or_cut_short(capsys, tmp_pat
     cut = tmp_path / 'cut.yaml'                 # cut after its first lines: still YAML
     cut.write_text(yaml.safe_dump({'name': 'cut', 'effects': []}))
     refused(capsys, ['sim', '--scene', cut], cut, 'missing required key')
+
+
+def test_arm_markers_lost_inside_the_strike_are_refused_not_guessed(capsys, tmp_path,
+                                                                     window_csv):
+    """Point 1: the arm's markers lost (-1, -1) for 20 frames around the peak tip speed, then
+    tracked again: no number is given for a strike the markers do not show."""
+    lines = window_csv.splitlines()
+    rows = [line.split(b',') for line in lines[2:]]
+    peak_row = 10747 - WINDOW[0]                # the peak tip speed of this export
+    for row in rows[peak_row - 10:peak_row + 10]:
+        row[6:12] = [b'-1'] * 6                 # ma1, ma2, ma3
+    lost = tmp_path / 'lost_track.csv'
+    lost.write_bytes(b'\n'.join(lines[:2] + [b','.join(r) for r in rows]) + b'\n')
+    refused(capsys, ['analyze', lost, '--d-t-mm', '23'], lost,
+            'the markers were lost inside the strike')
+
+
+def test_a_bag_whose_marker_block_has_the_wrong_length(capsys, tmp_path, strike_bag):
+    """Point 4: contents that pass every CRC but are wrong."""
+    from rclpy.serialization import deserialize_message, serialize_message
+    from std_msgs.msg import Float64MultiArray
+
+    from mantis_rig.recording import BagReader, BagWriter
+    reader = BagReader(strike_bag)
+    bag = tmp_path / 'short_block_bag'
+    seen = 0
+    with BagWriter(bag, sync_period_s=0) as out:
+        for topic, info in reader.topics.items():
+            out.add_topic(topic, info.type_name)
+        for name, record in reader.metadata_records:
+            out.add_metadata(name, record)
+        for channel, _, message in reader.raw_messages():
+            data = message.data
+            if channel.topic == '/camera/markers':
+                seen += 1
+                if seen == 2:
+                    msg = deserialize_message(data, Float64MultiArray)
+                    msg.data = list(msg.data)[:len(msg.data) // 2]
+                    data = serialize_message(msg)
+            out.write_serialized(channel.topic, data, message.log_time)
+    refused(capsys, ['analyze', bag], bag, 'a malformed block on /camera/markers')
