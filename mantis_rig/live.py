@@ -60,7 +60,6 @@ class LiveRelay:
         self.node = rclpy.create_node('mantis_live', context=ros_context,
                                       start_parameter_services=False)
         self.channels = {}
-        self.relayed = 0
         for spec in topics:
             schema = foxglove.Schema(name=spec.type_name, encoding=SCHEMA_ENCODING,
                                      data=full_message_definition(spec.type_name).encode())
@@ -87,7 +86,6 @@ class LiveRelay:
 
         def relay(data: bytes) -> None:
             channel.log(bytes(data), log_time=clock.now().nanoseconds)
-            self.relayed += 1
         return relay
 
     def close(self) -> None:

@@ -132,7 +132,7 @@ def run_sweep(scene_name: str, overrides: list, designs: list[dict], out: Path, 
     ids = [design_id(d) for d in designs]
     todo = [(i, d) for i, (i_d, d) in enumerate(zip(ids, designs)) if i_d not in earlier]
     rows = {i: earlier[i_d] for i, i_d in enumerate(ids) if i_d in earlier}
-    started = [time.monotonic()]           # of the computing (after a cluster is up)
+    started = time.monotonic()             # of the computing (after a cluster is up)
     bar = Progress(len(designs), len(rows)) if progress else None
     strikes_s = 0.0
 
@@ -144,12 +144,13 @@ def run_sweep(scene_name: str, overrides: list, designs: list[dict], out: Path, 
         if bar:
             bar.advance(len(chunk_rows))
 
-    last_checkpoint = [time.monotonic()]
+    last_checkpoint = time.monotonic()
 
     def checkpoint(force=False):
-        if force or time.monotonic() - last_checkpoint[0] >= CHECKPOINT_S:
+        nonlocal last_checkpoint
+        if force or time.monotonic() - last_checkpoint >= CHECKPOINT_S:
             write_table([rows[i] for i in sorted(rows)], out)
-            last_checkpoint[0] = time.monotonic()
+            last_checkpoint = time.monotonic()
 
     try:
         if workers == 0 and scheduler is None:
@@ -161,7 +162,7 @@ def run_sweep(scene_name: str, overrides: list, designs: list[dict], out: Path, 
                 checkpoint()
         else:
             client, cluster, where = _connect(scheduler, workers)
-            started[0] = time.monotonic()
+            started = time.monotonic()
             try:
                 n_workers = max(1, len(client.scheduler_info().get('workers', {})))
                 size = chunk_size or chunk_size_for(estimated_strike_s, len(todo), n_workers)
@@ -179,7 +180,7 @@ def run_sweep(scene_name: str, overrides: list, designs: list[dict], out: Path, 
     ordered = [rows[i] for i in sorted(rows)]
     return SweepSummary(designs=len(designs), computed=len(todo), reused=len(designs) - len(todo),
                         ok=sum(r.get('status') == STATUS_OK for r in ordered),
-                        wall_s=time.monotonic() - started[0], strikes_s=strikes_s,
+                        wall_s=time.monotonic() - started, strikes_s=strikes_s,
                         workers=n_workers, where=where)
 
 

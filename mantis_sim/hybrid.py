@@ -288,15 +288,21 @@ class HybridSimulator:
         """The drive was commanded anew at t (the current time): its speed may jump. A
         compliant tendon takes the jump in its stretch; a taut rigid tendon on a free arm needs
         an impulse, or goes slack if it would have to push."""
-        mode, s = self.mode, self.state
+        mode = self.mode
         if not (self.model.rigid and mode.taut) or self._constrained(mode):
             return
+        self.state = self._relock(mode, t, self.state)
+
+    def _relock(self, mode: Mode, t, s):
+        """A rigid tendon on a free arm whose stretch rate may not be zero (a new drive speed,
+        the end of a yield): an impulse makes it taut, or it goes slack if it would have to
+        push. Returns the state after."""
         tg = self.model.mech.tendon(s[0], s[1])
         stretch_rate = tg.d1 * s[2] + tg.d3 * s[3] - self.model.free_length(t)[1]
         if stretch_rate < 0.0 and self.model.unilateral:
             mode.taut = False
-            return
-        self.state = self._retension(mode, t, s)
+            return s
+        return self._retension(mode, t, s)
 
     # --- main loop ------------------------------------------------------------------------------
     def initial_state(self):
@@ -378,12 +384,7 @@ class HybridSimulator:
             elif name == 'resume':
                 # back to its unstretched length: locked again, or slack if still shortening
                 mode.saturated = False
-                tg = self.model.mech.tendon(s[0], s[1])
-                rate = tg.d1 * s[2] + tg.d3 * s[3] - self.model.free_length(t)[1]
-                if rate < 0.0 and self.model.unilateral:
-                    mode.taut = False
-                else:
-                    s = self._retension(mode, t, s)
+                s = self._relock(mode, t, s)
             elif name == 'retension':
                 s = self._retension(mode, t, s) if self.model.rigid else s
                 mode.taut = True

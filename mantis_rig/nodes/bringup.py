@@ -36,7 +36,7 @@ import yaml
 from mantis_rig.safety_limits import FORCE_CEILING_NAME, FORCE_GUARD_NODES
 
 from .executors import STACK_PARENT_ENV, Spinner, light_executor, threaded_executor
-from .sim_rig import DEVICE_CLASSES, DEVICE_THREADS, WORLD_NODE, SimRig, device_class
+from .sim_rig import DEVICE_CLASSES, DEVICE_THREADS, WORLD_NODE, SimRig, device_class, release
 
 SUPERVISOR_NODE = ('supervisor_node', 'SupervisorNode')
 SIM_RIG_PROCESS = 'sim_rig'
@@ -110,8 +110,8 @@ class Stack:
     def __init__(self, config: StackConfig, log_dir: Path | None = None):
         self.config = config
         self.log_dir = log_dir
-        self.nodes = []
-        self.rig: SimRig | None = None
+        self.nodes = []                       # the nodes this stack made itself
+        self.rig: SimRig | None = None        # the simulated rig's, in one process
         self.processes: dict[str, subprocess.Popen] = {}
         # the supervisor, the world and clients: callbacks that never block
         self.executor = light_executor()
@@ -143,7 +143,6 @@ class Stack:
                 # set by the world, not by /clock subscriptions
                 supervisor_params.pop('use_sim_time', None)
                 self.rig = SimRig(params)
-                self.nodes.extend(self.rig.nodes)
                 self.rig.add_to(self.executor, self.device_executor)
             else:
                 for name in DEVICE_CLASSES:
@@ -164,7 +163,8 @@ class Stack:
         executor.add_node(node)
 
     def node(self, name: str):
-        return next(n for n in self.nodes if n.get_name() == name)
+        rig_nodes = self.rig.nodes if self.rig is not None else []
+        return next(n for n in (*rig_nodes, *self.nodes) if n.get_name() == name)
 
     def _start_processes(self) -> None:
         params = {name: {'ros__parameters': values}
@@ -225,11 +225,9 @@ class Stack:
         _end_processes(self.processes.values(), signum)
         for spinner in self._spinners:
             spinner.stop()
-        rig_nodes = self.rig.nodes if self.rig is not None else []
         for node in reversed(self.nodes):
-            if node not in rig_nodes:
-                _release(node)
-                node.destroy_node()
+            release(node)
+            node.destroy_node()
         if self.rig is not None:
             self.rig.destroy_node()
             self.rig = None
@@ -241,6 +239,8 @@ class Stack:
         """Stop the stage by the quickest route, from a signal handler: the stage node's
         device in this process, or a SIGTERM to its process (whose handler stops it); every
         other node process gets SIGTERM too and ends by itself."""
+        if self.rig is not None:
+            self.rig.emergency_stop()
         for node in self.nodes:
             if node.get_name() == 'stage_node':
                 node.emergency_stop()
@@ -273,13 +273,3 @@ def _end_processes(processes, signum: int, grace_s: float = 2.5) -> None:
             process.kill()
             process.wait()
 
-
-def _release(node) -> None:
-    """Take a lifecycle node to finalized so that it releases its device."""
-    shutdown = getattr(node, 'trigger_shutdown', None)
-    if shutdown is None:
-        return
-    try:
-        shutdown()
-    except Exception:           # already finalized, or in a state with no shutdown
-        pass

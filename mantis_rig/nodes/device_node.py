@@ -117,7 +117,6 @@ class DeviceNode(LifecycleNode):
         sim backend cannot be configured; sim_clock: the SharedSimClock that sets this node's
         time. Both come from the simulated rig (mantis_rig.nodes.sim_rig)."""
         super().__init__(node_name, **kwargs)
-        self._sim_clock = sim_clock
         if sim_clock is not None:
             sim_clock.attach(self)
         self._specs = {p.name: p for p in COMMON_PARAMETERS + self.PARAMETERS}

@@ -108,14 +108,21 @@ class SimRig:
         world."""
         self.emergency_stop()
         for node in reversed(self.nodes):
-            shutdown = getattr(node, 'trigger_shutdown', None)
-            if shutdown is not None:
-                try:
-                    shutdown()
-                except Exception:       # noqa: BLE001 - already finalized
-                    pass
+            release(node)
             node.destroy_node()
         self.nodes = []
+
+
+def release(node) -> None:
+    """Take a lifecycle node to finalized so that it releases its device (nothing for another
+    node)."""
+    shutdown = getattr(node, 'trigger_shutdown', None)
+    if shutdown is None:
+        return
+    try:
+        shutdown()
+    except Exception:           # noqa: BLE001 - already finalized, or no shutdown from here
+        pass
 
 
 def main(args=None) -> int:
