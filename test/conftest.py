@@ -43,3 +43,26 @@ def authors_values() -> dict:
     with open(data_file('authors_values.csv'), newline='') as f:
         return {row.pop('file'): {k: (v if k == 'medium' else float(v)) for k, v in row.items()}
                 for row in csv.DictReader(f)}
+
+
+def rewritten_copy(bag, dest, replace=lambda message: message.data, conditions=None):
+    """A copy of ``bag`` with the second message on /camera/markers replaced by
+    ``replace(message)`` (bytes, CDR) and its trial conditions updated with ``conditions``:
+    contents that pass every CRC but are wrong."""
+    from mantis_rig.recording import BagReader, BagWriter
+    reader = BagReader(bag)
+    seen = 0
+    with BagWriter(dest, sync_period_s=0) as out:
+        for topic, info in reader.topics.items():
+            out.add_topic(topic, info.type_name)
+        out.add_metadata('trial_conditions',
+                         {**(reader.metadata('trial_conditions') or {}), **(conditions or {})})
+        for channel, _, message in reader.raw_messages():
+            data = message.data
+            if channel.topic == '/camera/markers':
+                seen += 1
+                if seen == 2:
+                    data = replace(message)
+            out.write_serialized(channel.topic, data, message.log_time)
+    assert seen >= 2
+    return dest

@@ -358,26 +358,29 @@ def test_invalid_parameters_are_refused_with_the_reason(rig):
     assert ok.successful
 
 
+def configure_fails(rig, name):
+    """Configure is refused, the node stays unconfigured; its last ERROR on /diagnostics."""
+    assert not rig.transition(name, Transition.TRANSITION_CONFIGURE)
+    assert rig.state(name) == 'unconfigured'
+    errors = rig.wait_for(lambda: [s for s in rig.diagnostics(name)
+                                   if s.level == DiagnosticStatus.ERROR], 'an ERROR', 30.0)
+    return errors[-1]
+
+
 def test_unknown_backend_fails_configure_with_the_reason_on_diagnostics(rig):
     rig.add(StageNode(context=rig.context,
                       parameter_overrides=[Parameter('backend', value='simulator')]))
-    assert not rig.transition('stage_node', Transition.TRANSITION_CONFIGURE)
-    assert rig.state('stage_node') == 'unconfigured'
-    errors = rig.wait_for(lambda: [s for s in rig.diagnostics('stage_node')
-                                   if s.level == DiagnosticStatus.ERROR], 'an ERROR', 30.0)
-    assert "unknown backend 'simulator'" in errors[-1].message
-    assert 'sim, hardware' in errors[-1].message
+    error = configure_fails(rig, 'stage_node')
+    assert "unknown backend 'simulator'" in error.message
+    assert 'sim, hardware' in error.message
 
 
 def test_a_simulated_device_alone_refuses_to_configure_and_names_the_rig(rig):
     """Outside the simulated rig there is no world for the sim backend to reach."""
     rig.add(LoadcellNode(context=rig.context, parameter_overrides=sim_overrides()))
-    assert not rig.transition('loadcell_node', Transition.TRANSITION_CONFIGURE)
-    assert rig.state('loadcell_node') == 'unconfigured'
-    errors = rig.wait_for(lambda: [s for s in rig.diagnostics('loadcell_node')
-                                   if s.level == DiagnosticStatus.ERROR], 'an ERROR', 30.0)
-    assert 'runs inside the simulated rig' in errors[-1].message
-    assert 'ros2 run mantis_rig sim_rig' in errors[-1].message
+    error = configure_fails(rig, 'loadcell_node')
+    assert 'runs inside the simulated rig' in error.message
+    assert 'ros2 run mantis_rig sim_rig' in error.message
 
 
 class FailingWorld(WorldPort):

@@ -105,6 +105,33 @@ def chunk_records(data: bytes):
     return spans
 
 
+BYTE_EDITS = st.lists(st.tuples(st.floats(0.0, 1.0), st.integers(0, 255)), min_size=1,
+                      max_size=8)
+
+
+def changed_bytes(edits):
+    """An edit for damaged_copy: each (where, value) sets the byte at that share of the file."""
+    def edit(data):
+        for where, value in edits:
+            data[min(int(len(data) * where), len(data) - 1)] = value
+        return data
+    return edit
+
+
+def changed_behind_crc(chunk, where, value, span):
+    """An edit for damaged_copy: `span` bytes inside a chunk's records set to `value`, the
+    chunk's CRC recomputed, so the decoder meets wrong lengths, opcodes and payloads."""
+    def edit(data):
+        spans = chunk_records(data)
+        start, length, crc_at = spans[chunk % len(spans)]
+        first = start + int(where * (length - 1))
+        data[first:min(first + span, start + length)] = bytes([value]) * min(
+            span, start + length - first)
+        struct.pack_into('<I', data, crc_at, zlib.crc32(bytes(data[start:start + length])))
+        return data
+    return edit
+
+
 @fuzz
 @given(cut=st.floats(0.0, 1.0))
 def test_a_bag_cut_anywhere_is_read_up_to_the_cut_or_refused(source_bag, cut):
@@ -115,14 +142,9 @@ def test_a_bag_cut_anywhere_is_read_up_to_the_cut_or_refused(source_bag, cut):
 
 
 @fuzz
-@given(edits=st.lists(st.tuples(st.floats(0.0, 1.0), st.integers(0, 255)), min_size=1,
-                      max_size=8))
+@given(edits=BYTE_EDITS)
 def test_a_bag_with_changed_bytes_is_read_or_refused(source_bag, edits):
-    def edit(data):
-        for where, value in edits:
-            data[min(int(len(data) * where), len(data) - 1)] = value
-        return data
-    bag = damaged_copy(source_bag, edit)
+    bag = damaged_copy(source_bag, changed_bytes(edits))
     read_everything(bag)
     shutil.rmtree(bag.parent)
 
@@ -134,15 +156,7 @@ def test_records_changed_behind_a_valid_crc_are_read_or_refused(source_bag, chun
                                                                 value, span):
     """The damage the CRCs do not catch: bytes inside a chunk changed, the chunk's CRC
     recomputed, so the decoder meets wrong lengths, opcodes and message payloads."""
-    def edit(data):
-        spans = chunk_records(data)
-        start, length, crc_at = spans[chunk % len(spans)]
-        first = start + int(where * (length - 1))
-        data[first:min(first + span, start + length)] = bytes([value]) * min(
-            span, start + length - first)
-        struct.pack_into('<I', data, crc_at, zlib.crc32(bytes(data[start:start + length])))
-        return data
-    bag = damaged_copy(source_bag, edit)
+    bag = damaged_copy(source_bag, changed_behind_crc(chunk, where, value, span))
     read_everything(bag)
     shutil.rmtree(bag.parent)
 
@@ -341,14 +355,9 @@ def test_the_strike_bag_itself_is_analysed(strike_bag):
 
 
 @fuzz
-@given(edits=st.lists(st.tuples(st.floats(0.0, 1.0), st.integers(0, 255)), min_size=1,
-                      max_size=8))
+@given(edits=BYTE_EDITS)
 def test_a_strike_bag_with_changed_bytes_is_analysed_plausibly_or_refused(strike_bag, edits):
-    def edit(data):
-        for where, value in edits:
-            data[min(int(len(data) * where), len(data) - 1)] = value
-        return data
-    bag = damaged_copy(strike_bag, edit)
+    bag = damaged_copy(strike_bag, changed_bytes(edits))
     bag_analysed_plausibly_or_refused(bag)
     shutil.rmtree(bag.parent)
 
@@ -360,14 +369,6 @@ def test_a_strike_bag_changed_behind_a_valid_crc_is_analysed_plausibly_or_refuse
         strike_bag, chunk, where, value, span):
     """Marker and force payloads changed where no CRC sees it: every number the analysis
     then reports must still be one the robot can produce."""
-    def edit(data):
-        spans = chunk_records(data)
-        start, length, crc_at = spans[chunk % len(spans)]
-        first = start + int(where * (length - 1))
-        data[first:min(first + span, start + length)] = bytes([value]) * min(
-            span, start + length - first)
-        struct.pack_into('<I', data, crc_at, zlib.crc32(bytes(data[start:start + length])))
-        return data
-    bag = damaged_copy(strike_bag, edit)
+    bag = damaged_copy(strike_bag, changed_behind_crc(chunk, where, value, span))
     bag_analysed_plausibly_or_refused(bag)
     shutil.rmtree(bag.parent)

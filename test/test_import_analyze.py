@@ -3,7 +3,7 @@ damaged bags are analysed up to the damage; bad spreadsheets name what is missin
 import json
 import shutil
 
-from conftest import data_file
+from conftest import data_file, rewritten_copy
 from mcap.reader import make_reader
 import numpy as np
 import pytest
@@ -340,29 +340,6 @@ def test_given_condition_out_of_range_is_refused(capsys, tmp_path, option, value
     code, _, err = run(capsys, 'import-tracking', tmp_path / 'absent.csv', '--out', out,
                        option, value)
     assert code == 2 and f'{option}: {why}' in err and not out.exists()
-
-
-def rewritten_copy(bag, dest, replace=lambda message: message.data, conditions=None):
-    """A copy of ``bag`` with the second message on /camera/markers replaced by
-    ``replace(message)`` (bytes, CDR) and its trial conditions updated with ``conditions``:
-    contents that pass every CRC but are wrong."""
-    from mantis_rig.recording import BagReader, BagWriter
-    reader = BagReader(bag)
-    seen = 0
-    with BagWriter(dest, sync_period_s=0) as out:
-        for topic, info in reader.topics.items():
-            out.add_topic(topic, info.type_name)
-        out.add_metadata('trial_conditions',
-                         {**(reader.metadata('trial_conditions') or {}), **(conditions or {})})
-        for channel, _, message in reader.raw_messages():
-            data = message.data
-            if channel.topic == '/camera/markers':
-                seen += 1
-                if seen == 2:
-                    data = replace(message)
-            out.write_serialized(channel.topic, data, message.log_time)
-    assert seen >= 2
-    return dest
 
 
 def test_bag_contents_that_pass_the_crc_but_are_wrong_are_refused_with_the_reason(

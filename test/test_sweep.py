@@ -100,33 +100,26 @@ def test_a_scheduler_and_two_workers_give_the_serial_table(serial_table, dask_cl
     assert comparable(read_table(out)) == comparable(serial_table)
 
 
-def test_a_worker_killed_in_mid_sweep_loses_no_design(dask_cluster, tmp_path):
+def test_a_worker_killed_in_mid_sweep_loses_no_design(dask_cluster, tmp_path, monkeypatch):
     """Slow designs one per task; once some are back, one worker is killed outright."""
+    from mantis_rig import sweep
     address, workers = dask_cluster
     slow = ['integration.solver=Radau', 'integration.rtol=1e-7']
     many = grid([parse_range('geometry.d_t_mm=19:25:12'),
                  parse_range('geometry.contact_angle_deg=1:8:3')])
     out = tmp_path / 'killed.parquet'
     killed = []
+    advance = sweep.Progress.advance
 
-    def progress_hook():
-        from mantis_rig import sweep
-        original = sweep.Progress.advance
+    def advance_then_kill(self, n):
+        advance(self, n)
+        if self.done >= 4 and not killed:
+            workers[0].kill()
+            killed.append(time.monotonic())
 
-        def advance(self, n):
-            original(self, n)
-            if self.done >= 4 and not killed:
-                workers[0].kill()
-                killed.append(time.monotonic())
-        return sweep, original, advance
-
-    module, original, patched = progress_hook()
-    module.Progress.advance = patched
-    try:
-        summary = run_sweep(SCENE, slow, many, out, scheduler=address, chunk_size=1,
-                            progress=True)
-    finally:
-        module.Progress.advance = original
+    monkeypatch.setattr(sweep.Progress, 'advance', advance_then_kill)
+    summary = run_sweep(SCENE, slow, many, out, scheduler=address, chunk_size=1,
+                        progress=True)
     assert killed, 'the worker was never killed'
     rows = read_table(out)
     assert summary.computed == len(many) == len(rows) == 36
