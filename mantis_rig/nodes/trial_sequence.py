@@ -34,9 +34,11 @@ AT_REST_M_PER_S = 1e-6
 # motion yet (the supervisor then took a move just sent for one already over).
 SETTLED_S = 0.3
 MOVE_ATTEMPTS = 3
-# A velocity command the stage has not acted on after this long (rig time) is sent again: the
-# stage refuses a pull until its own force feed has a reading, and in a multi-process stack
-# that feed can start after the supervisor's (the refusal is a WARN, not a fault).
+# A command the stage has not acted on after this long is sent again: the stage refuses a pull
+# until its own force feed has a reading, and in a multi-process stack that feed can start after
+# the supervisor's (the refusal is a WARN, not a fault). On both clocks: the stage's reaction
+# takes rig time, the command's delivery wall time, and at --real-time-factor 0 the simulated
+# rig's time runs ahead of a command still on its way.
 MOVE_START_S = 0.5
 HOMED_WAIT_S = 3.0               # unknown after this long: go on without homing
 QUERY_RETRY_S = 5.0              # an idempotent query unanswered this long is sent again
@@ -325,13 +327,30 @@ class TrialSequence:
         tolerance_m = self.conditions.position_tolerance_mm * 1e-3
         for _ in range(MOVE_ATTEMPTS):
             self.rig.move_to(target_m)
-            commanded = self.rig.now_s()
-            self._wait(lambda since=commanded: self._at_rest() and SETTLED_S
-                       <= self.rig.now_s() - max(since, self._last_motion), what)
+            commanded = self._command_sent()
+
+            def settled(since=commanded) -> bool:
+                acted = self._last_motion > since[0] \
+                    or abs(self.stage_position_m - target_m) < tolerance_m
+                if not acted:
+                    return self._not_acted_on(since)
+                return self._at_rest() and SETTLED_S <= self.rig.now_s() - self._last_motion \
+                    and SETTLED_S <= self.rig.now_s() - since[0]
+
+            self._wait(settled, what)
             error_m = self.stage_position_m - target_m
             if abs(error_m) < tolerance_m:
                 break
         return error_m
+
+    def _command_sent(self) -> tuple[float, float]:
+        """(rig time, wall time) of a command just sent."""
+        return self.rig.now_s(), time.monotonic()
+
+    def _not_acted_on(self, sent: tuple[float, float]) -> bool:
+        """MOVE_START_S has passed on both clocks since ``sent`` (:meth:`_command_sent`)."""
+        return (self.rig.now_s() - sent[0] >= MOVE_START_S
+                and time.monotonic() - sent[1] >= MOVE_START_S)
 
     def _take_up_slack(self) -> None:
         self._set_state('taking_up_slack')
@@ -370,12 +389,13 @@ class TrialSequence:
     def _start_moving(self, velocity_m_per_s: float, what: str,
                       done: Callable[[], bool]) -> None:
         """Command a constant velocity until the stage moves (or ``done()``): a command it has
-        not acted on within MOVE_START_S of rig time is sent again, MOVE_ATTEMPTS in all."""
+        not acted on within MOVE_START_S (:meth:`_not_acted_on`) is sent again, MOVE_ATTEMPTS in
+        all."""
         for _ in range(MOVE_ATTEMPTS):
             self.rig.move_at(velocity_m_per_s)
-            commanded = self.rig.now_s()
+            commanded = self._command_sent()
             self._wait(lambda since=commanded: not self._at_rest() or done()
-                       or self.rig.now_s() - since >= MOVE_START_S, what)
+                       or self._not_acted_on(since), what)
             if not self._at_rest() or done():
                 return
         self._fail(f'{what}: the stage did not start moving after {MOVE_ATTEMPTS} velocity '
