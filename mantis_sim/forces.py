@@ -86,15 +86,23 @@ class Gravity:
                     for mass, p in ((m.m1, pts['com_body']), (m.m2, pts['com_arm'])))
 
 
+# Gauss-Legendre nodes and weights on [-1, 1]: the blade's strip integral with three strips,
+# exact for pure rotation (force ~ r^2, moment ~ r^3); against a 64-strip sum over random
+# states, within 0.04 % where the flow does not reverse along the blade, 6 % where it does.
+_GAUSS_NODES = (-math.sqrt(0.6), 0.0, math.sqrt(0.6))
+_GAUSS_WEIGHTS = (5.0 / 9.0, 8.0 / 9.0, 5.0 / 9.0)
+
+
 class FluidDrag:
     """Quadratic drag on the body plate, quasi-steady lift and drag on the arm blade.
 
     Body: a plate of area S_b rotating about a feels -rho C_D S_b L1^3 |w1| w1 / 8 (strip
-    integral). Blade: at its centre of pressure r_cp = int r^3 / int r^2 over [L5, L3] (pure
-    rotation), C_L = 1.8 sin 2a and C_D = 0.4 + 3.0 sin^2 a (edge-on 0.4, broadside 3.4), a the
-    angle between the local velocity and the blade. Below the regularisation speed the angle of
-    attack is undefined; |v| is replaced by sqrt(|v|^2 + eps^2) so that every term stays smooth
-    and vanishes at rest.
+    integral). Blade: strip theory over [L5, L3] from b, each strip of width S_a / (L3 - L5)
+    loaded by its own velocity with the section coefficients of the scene's arm (C_D from
+    edge-on to broadside as sin^2 a, C_L peaking at 45 deg as sin 2a, a the angle between the
+    local velocity and the blade); the integral is taken with three Gauss-Legendre strips.
+    Below the regularisation speed the angle of attack is undefined; |v| is replaced by
+    sqrt(|v|^2 + eps^2) so that every term stays smooth and vanishes at rest.
     """
 
     name = 'fluid_drag'
@@ -106,29 +114,39 @@ class FluidDrag:
         self.mech = mech
         self.blade = blade
         self.body_coeff = rho * scene.body.drag_coefficient * scene.body.area_mm2 * g.L1_mm ** 3 / 8
-        self.half_rho_area = 0.5 * rho * scene.arm.blade_area_mm2
         lo, hi = g.L5_mm, g.L3_mm
-        self.r_cp = 0.75 * (hi ** 4 - lo ** 4) / (hi ** 3 - lo ** 3)
+        half_span = 0.5 * (hi - lo)
+        chord = scene.arm.blade_area_mm2 / (hi - lo)
+        self.strips = [(0.5 * (hi + lo) + half_span * x, 0.5 * rho * chord * half_span * w)
+                       for x, w in zip(_GAUSS_NODES, _GAUSS_WEIGHTS)]
         self.eps_sq = scene.medium.regularisation_speed_m_per_s ** 2
+        arm = scene.arm
+        self.drag_edge_on = arm.blade_drag_edge_on
+        self.drag_rise = arm.blade_drag_broadside - arm.blade_drag_edge_on
+        self.lift_twice = 2.0 * arm.blade_lift_peak     # sin 2a = 2 sin a cos a
 
-    def blade_force(self, th3, w1, w3):
-        """(F_along, F_normal) on the blade in N, with the Jacobian rows of the CP velocity."""
-        v_t, v_n, j_t, j_n = self.mech.arm_point_velocity(self.r_cp, th3, w1, w3)
+    def strip_force(self, r, half_rho_area, th3, w1, w3):
+        """(F_along, F_normal) in N on the strip at r from b (``half_rho_area``: rho/2 times
+        its share of the blade's area), the Jacobian rows of its velocity, and that velocity."""
+        v_t, v_n, j_t, j_n = self.mech.arm_point_velocity(r, th3, w1, w3)
         speed = math.sqrt(v_t * v_t + v_n * v_n + self.eps_sq)
-        drag = self.half_rho_area * (0.4 + 3.0 * v_n * v_n / (speed * speed)) * speed
-        lift = self.half_rho_area * 3.6 * v_t * v_n / speed
+        drag = half_rho_area * (self.drag_edge_on + self.drag_rise * v_n * v_n / (speed * speed)) \
+            * speed
+        lift = half_rho_area * self.lift_twice * v_t * v_n / speed
         f_t = -drag * v_t + lift * v_n
         f_n = -drag * v_n - lift * v_t
         return f_t, f_n, j_t, j_n, v_t, v_n
 
     def __call__(self, th1, th3, w1, w3):
         body = -self.body_coeff * abs(w1) * w1
-        if not self.blade:
-            return body, 0.0, -body * w1
-        f_t, f_n, j_t, j_n, v_t, v_n = self.blade_force(th3, w1, w3)
-        q1 = body + f_t * j_t[0] + f_n * j_n[0]
-        q3 = f_t * j_t[1] + f_n * j_n[1]
-        return q1, q3, -(body * w1 + f_t * v_t + f_n * v_n)
+        q1, q3, power = body, 0.0, body * w1
+        if self.blade:
+            for r, half_rho_area in self.strips:
+                f_t, f_n, j_t, j_n, v_t, v_n = self.strip_force(r, half_rho_area, th3, w1, w3)
+                q1 += f_t * j_t[0] + f_n * j_n[0]
+                q3 += f_t * j_t[1] + f_n * j_n[1]
+                power += f_t * v_t + f_n * v_n
+        return q1, q3, -power
 
 
 class PublishedArmAirLoad:

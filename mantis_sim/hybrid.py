@@ -35,6 +35,11 @@ SEPARATION = 1e-7
 # this to carry it across the separation band: a tension that fell to zero leaves it grazing, a
 # stage stop under a moving arm leaves it separating at the stage's speed.
 GRAZING_TIME_MS = 0.1
+# A latched arm whose contact torque is within this of zero (N mm) at a segment's end is let go
+# there: the next segment's event function, evaluated on its own Newton solve of the latched
+# body angle, may already read the torque a rounding below zero and then never sees it cross
+# (a stop at the unlatching instant left the arm latched for good).
+UNLATCH_TORQUE_TOL_NMM = 1e-9
 MAX_EVENTS_AT_ONE_INSTANT = 12
 MIN_SPAN_MS = 1e-9
 STATE_SCALE = (1.0, 1.0, 1.0, 1.0, 100.0, 100.0)   # rad, rad, rad/ms, rad/ms, mJ, mJ
@@ -214,7 +219,7 @@ class HybridSimulator:
                     mode.taut = False
                     self.run_data.events.append(('slack', t, s))
                     continue
-            if mode.latched and d.contact_torque_Nmm < 0.0:
+            if mode.latched and d.contact_torque_Nmm < UNLATCH_TORQUE_TOL_NMM:
                 mode.latched = False
                 self.run_data.events.append(('unlatch', t, s))
                 phase = self._advance(phase, 'II', t)
@@ -371,7 +376,10 @@ class HybridSimulator:
                                       f'(last: {name}); the contact or tendon is chattering')
             self._last_t = t = t_new
             self.t, self.state = t, s
-            if name is None or name == 'separate':
+            if name == 'separate':
+                continue
+            if name is None:                # a stop or a drive knot: it may fall on a root
+                self.phase = phase = self._settle(mode, t, s, phase)
                 continue
             run.events.append((name, t, s))
             if name == 'unlatch':

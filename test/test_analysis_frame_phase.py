@@ -4,8 +4,8 @@ test_analysis_sim_trial analyses one simulated trial; its stage starts on the wo
 grid, which holds a whole number of frames, so every such trial sees the strike at the same
 frame phase: one draw of the quantisation errors. Here one strike of air_23mm_rig is filmed
 at eight frame phases and each film analysed as `mantis analyze` analyses the trial's bag.
-Bounds from `bench/bench_sim_camera.py` (16 phases at 19,000 frames/s: peak tip speed -2.47 ..
-+0.44 %, its time -2.1 .. +1.0 frames, overcentering -1.2 .. -0.9 frames; README).
+Bounds from `bench/bench_sim_camera.py` (48 phases at 19,000 frames/s: peak tip speed -0.59 ..
++0.02 %, its time -0.28 .. -0.01 frames, overcentering -0.33 .. +0.01 frames; README).
 """
 import numpy as np
 import pytest
@@ -36,7 +36,17 @@ def test_peak_time_over_the_frame_phase(films):
 
 
 def test_overcentering_over_the_frame_phase(films):
-    """About one frame early at every phase: the pivot fitted on pixel-quantised arcs puts θ1
-    ~2 mrad off (on unquantised markers the error is under 0.1 frame)."""
+    """Within a third of a frame at every phase at the tracker's 0.1-pixel resolution (it was
+    about one frame early when the simulated camera gave whole pixels)."""
     errors = np.array([f.phase_frames['III'] for f in films])
     assert np.max(np.abs(errors)) < 1.5, errors
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    'issue 13 goal not met: the start of IV is -1.4 .. +9.0 frames over 48 phases (the body '
+    'turns round while moving less than the tracking noise; its time is extrapolated from '
+    'the rise), unlatching +13 .. +49 (the arm leaves the latch below the noise for ~2 ms)'))
+def test_phase_starts_within_two_frames_at_every_frame_phase(films):
+    for phase in ('II', 'III', 'IV'):
+        errors = np.array([f.phase_frames[phase] for f in films])
+        assert np.max(np.abs(errors)) < 2.0, (phase, errors)

@@ -96,11 +96,22 @@ def max_contraction(t: np.ndarray, omega1_radps: np.ndarray, omega1_noise_radps:
     if not np.mean(band[i_neg:i_pos + 1]) >= abs(loading_rate_radps):
         t_iv = 0.5 * (t_neg + t_pos)          # resolved (or no loading rate to judge by)
     else:
-        hi = min(i_pos + 1, len(t) - 1)
-        slope = (omega1_radps[hi] - omega1_radps[i_pos - 1]) / (t[hi] - t[i_pos - 1])
+        slope = _rising_slope(t, omega1_radps, band, i_pos)
         b = float(np.interp(t_pos, t[i_pos - 1:i_pos + 1], band[i_pos - 1:i_pos + 1]))
         t_iv = max(t_neg, t_pos - b / slope) if slope > 0 else t_pos
     return float(t_iv), int(np.argmin(np.abs(t - t_iv)))
+
+
+def _rising_slope(t: np.ndarray, omega1_radps: np.ndarray, band: np.ndarray, i_pos: int,
+                  ) -> float:
+    """dθ̇1/dt where θ̇1 rises out of the band: the least-squares line through the frames from
+    two before ``i_pos`` to the first above three bands (at least six). Two frames alone give
+    a slope as noisy as its value, and the tangent then reached back tens of frames."""
+    lo = max(i_pos - 2, 0)
+    above = np.nonzero(omega1_radps[i_pos:] > 3.0 * band[i_pos:])[0]
+    hi = i_pos + (int(above[0]) if len(above) else 0)
+    hi = min(max(hi, lo + 5), len(t) - 1)
+    return float(np.polyfit(t[lo:hi + 1] - t[i_pos], omega1_radps[lo:hi + 1], 1)[0])
 
 
 def peak_time_and_value(t: np.ndarray, values: np.ndarray, i: int) -> tuple[float, float]:
