@@ -137,8 +137,11 @@ def test_a_trial_from_the_installed_executables(install, tmp_path):
     assert 'answer: True trial started; logging to' in output, \
         output + (tmp_path / 'supervisor.log').read_text(errors='replace')
     assert 'state: done' in output, output + (tmp_path / 'supervisor.log').read_text()
-    assert [p.returncode for p in started] == [130, 130], \
-        (tmp_path / 'rig.log').read_text(errors='replace')
+    statuses = [p.returncode for p in started]
+    assert statuses == [130, 130], '\n'.join(
+        [f'exit statuses (rig, supervisor): {statuses}']
+        + [f'--- {name}.log\n' + (tmp_path / f'{name}.log').read_text(errors='replace')
+           for name in ('rig', 'supervisor')])
     bags = [p for p in trials.iterdir() if p.is_dir()]
     assert len(bags) == 1
     reader = BagReader(bags[0])

@@ -146,7 +146,7 @@ def run_node(node_class, args=None, make_executor=None) -> int:
     finally:
         signals.shield()
         if node is not None:
-            node.destroy_node()
+            _call(node, 'destroy_node')     # a failure here is reported, not a new exit status
         rclpy.try_shutdown()
     return status
 
