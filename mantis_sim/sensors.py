@@ -14,9 +14,20 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import lfilter
 
 from .scene import Scene
+
+
+def first_order_lowpass(x: np.ndarray, pole: float, previous: float) -> np.ndarray:
+    """y[n] = pole y[n-1] + (1 - pole) x[n] from y[-1] = ``previous`` (scipy.signal.lfilter
+    with b = [1 - pole], a = [1, -pole]). Written out because importing scipy.signal costs a
+    simulated trial more CPU than this loop over all its 20 kS/s (bench/bench_trial.py)."""
+    gain, y, out = 1.0 - pole, previous, []
+    append = out.append
+    for value in x.tolist():
+        y = pole * y + gain * value
+        append(y)
+    return np.array(out)
 
 
 class LoadCellSensor:
@@ -31,7 +42,7 @@ class LoadCellSensor:
         self.noise_N = cell.noise_N
         # Exact discretisation of tau dy/dt + y = x for a held input.
         self._pole = math.exp(-2.0 * math.pi * cell.bandwidth_hz / sample_rate_hz)
-        self._state = None
+        self._previous = None                   # the filter's last output, N
         self._rng = np.random.default_rng(seed)
 
     def measure_volts(self, force_N: np.ndarray) -> np.ndarray:
@@ -39,13 +50,13 @@ class LoadCellSensor:
         force_N = np.asarray(force_N, dtype=float)
         if not self.enabled:
             return force_N / self.newtons_per_volt
-        if self._state is None:                  # start settled on the first sample
-            self._state = np.array([self._pole * force_N[0]]) if force_N.size else None
-        if force_N.size:
-            filtered, self._state = lfilter([1.0 - self._pole], [1.0, -self._pole], force_N,
-                                            zi=self._state)
-        else:
+        if not force_N.size:
             filtered = force_N
+        else:
+            if self._previous is None:               # start settled on the first sample
+                self._previous = float(force_N[0])
+            filtered = first_order_lowpass(force_N, self._pole, self._previous)
+            self._previous = float(filtered[-1])
         noisy = filtered + self._rng.normal(0.0, self.noise_N, filtered.size)
         volts = np.clip(noisy / self.newtons_per_volt, -self.range_V, self.range_V)
         return np.round(volts / self.lsb_V) * self.lsb_V

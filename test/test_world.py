@@ -149,3 +149,22 @@ def test_a_stop_ends_a_move_where_the_stage_is():
     world.advance_to(1.5)
     assert world.stage_position_m() == stopped_at
     assert world.stage_velocity_m_per_s() == 0.0
+
+
+def test_the_load_cell_filter_is_lfilter():
+    """The amplifier's first-order low-pass, written out, against scipy.signal.lfilter over
+    blocks of any size (the state carries over)."""
+    from scipy.signal import lfilter
+
+    from mantis_sim.sensors import first_order_lowpass
+    rng = np.random.default_rng(5)
+    x = rng.normal(10.0, 3.0, 5000)
+    pole = math.exp(-2.0 * math.pi * 1000.0 / 20000.0)
+    expected, _ = lfilter([1.0 - pole], [1.0, -pole], x, zi=[pole * x[0]])
+    got, previous = [], float(x[0])
+    for block in np.split(x, [1, 7, 1000, 1001, 4096]):
+        y = first_order_lowpass(block, pole, previous)
+        if y.size:
+            previous = float(y[-1])
+        got.append(y)
+    assert np.allclose(np.concatenate(got), expected, rtol=1e-12, atol=1e-12)
