@@ -25,29 +25,32 @@ def _lock_dir() -> Path:
     return path
 
 
-_next_start: list[int] = []     # where this process's next claim starts looking
-
-
 def claim_free_domain() -> int:
     """Lock and return a ROS domain id that no other process on this machine has claimed.
 
-    Successive claims of one process move on through the ids rather than taking the one just
-    released: participants of a process that ended without cleaning up (SIGKILL, os._exit)
-    stay in a domain's discovery until their lease runs out, and the next test in that domain
-    would see their services (a ghost /stage_node/get_state that never answers)."""
-    if not _next_start:
-        _next_start.append(os.getpid() % len(DOMAIN_IDS))
-    start = _next_start[0]
-    ids = list(DOMAIN_IDS)[start:] + list(DOMAIN_IDS)[:start]
-    for domain in ids:
-        handle = open(_lock_dir() / f'domain_{domain}.lock', 'w')
+    Of the free ids it takes the one used longest ago, by any process (a lock file's
+    modification time marks its last claim and release): participants of a process that ended
+    without cleaning up (SIGKILL, os._exit) stay in a domain's discovery until their lease runs
+    out, and the next test in that domain, in this process or a parallel one, would see their
+    services (a ghost /stage_node/get_state that never answers)."""
+    lock_dir = _lock_dir()
+
+    def last_used(domain: int) -> float:
+        try:
+            return (lock_dir / f'domain_{domain}.lock').stat().st_mtime
+        except FileNotFoundError:
+            return 0.0
+
+    for domain in sorted(DOMAIN_IDS, key=last_used):
+        path = lock_dir / f'domain_{domain}.lock'
+        handle = open(path, 'a')
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             handle.close()
             continue
+        os.utime(path)
         _held_locks[domain] = handle
-        _next_start[0] = (DOMAIN_IDS.index(domain) + 1) % len(DOMAIN_IDS)
         return domain
     raise RuntimeError(f'every ROS domain id in {DOMAIN_IDS.start}..{DOMAIN_IDS.stop - 1} is '
                        f'claimed by another process on this machine')
@@ -57,6 +60,7 @@ def release_domain(domain: int) -> None:
     """Give back a domain this process claimed (no-op for one it does not hold)."""
     handle = _held_locks.pop(domain, None)
     if handle is not None:
+        os.utime(handle.name)           # released now: the last to be claimed again
         handle.close()
 
 

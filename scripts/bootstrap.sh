@@ -3,7 +3,7 @@
 # mantis_rig installed in it (editable). Safe to run again: it reinstalls only when
 # requirements.txt, setup.py or the node list changed. With --test, also requirements-test.txt,
 # and .venv-colcon for the test of the ROS install path, installed alongside .venv (the two
-# installs are independent; side by side they take a fresh clone's set-up from ~60 s to ~45 s).
+# installs are independent; side by side they take a fresh clone's set-up from ~60 s to ~40 s).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -69,12 +69,17 @@ install_test() {
 if [ "${1:-}" = "--test" ]; then
   install_colcon &
   colcon_job=$!
+  # If the installs here fail, set -e exits: take the background install down with us rather
+  # than leave it writing into .venv-colcon for the next run to race.
+  trap 'kill "$colcon_job" 2>/dev/null || true; wait "$colcon_job" 2>/dev/null || true' EXIT
   install_main
   install_test
   if ! wait "$colcon_job"; then
+    trap - EXIT
     echo "bootstrap: installing .venv-colcon failed (above)" >&2
     exit 1
   fi
+  trap - EXIT
 else
   install_main
 fi

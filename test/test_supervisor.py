@@ -456,3 +456,19 @@ def test_successive_ros_domain_claims_move_on():
     second = claim_free_domain()
     release_domain(second)
     assert second != first
+
+
+def test_a_domain_another_process_just_left_is_not_claimed_next():
+    """Parallel test workers: the domain a process has just released (its participants may
+    linger in discovery) is the last one any other process claims."""
+    import subprocess
+    import sys
+
+    from mantis_rig.ros_env import claim_free_domain, release_domain
+    left = subprocess.run(
+        [sys.executable, '-c', 'from mantis_rig.ros_env import claim_free_domain, '
+         'release_domain; d = claim_free_domain(); release_domain(d); print(d)'],
+        capture_output=True, text=True, check=True)
+    mine = claim_free_domain()
+    release_domain(mine)
+    assert mine != int(left.stdout)

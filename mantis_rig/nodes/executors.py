@@ -158,4 +158,5 @@ def _call(node, method: str, *args) -> None:
     try:
         function(*args)
     except Exception as exc:       # noqa: BLE001 - the rest of the shutdown must go on
-        print(f'{node.get_name()}: {method}: {exc}', file=sys.stderr, flush=True)
+        # the class, not get_name(): a node half destroyed has no name to give any more
+        print(f'{type(node).__name__}: {method}: {exc}', file=sys.stderr, flush=True)
