@@ -58,17 +58,19 @@ class PlaybackClock:
 
 @dataclass
 class TimingStats:
-    """Per-publication lateness (actual - due, s) and the log/wall spans of the playback."""
+    """Per-publication lateness (actual - due, s) and the log/wall spans of the playback: the
+    wall span runs from when the first publication was due to when the last went out, so a
+    late start (a busy machine) does not make the playback look faster than it was."""
 
     lateness_s: list = field(default_factory=list)
     log_span_s: float = 0.0
     wall_span_s: float = 0.0
-    _first: tuple | None = None  # (log ns, wall s) of the first publication
+    _first: tuple | None = None  # (log ns, due wall s) of the first publication
 
     def record(self, log_ns: int, due_s: float, actual_s: float) -> None:
         self.lateness_s.append(actual_s - due_s)
         if self._first is None:
-            self._first = (log_ns, actual_s)
+            self._first = (log_ns, due_s)
         else:
             self.log_span_s = (log_ns - self._first[0]) / _NS_PER_S
             self.wall_span_s = actual_s - self._first[1]
