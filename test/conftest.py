@@ -2,7 +2,8 @@
 
 Each test claims a domain of its own (a lock no parallel pytest run can take) before it starts
 any ROS context or process, and gives it back afterwards; module fixtures, set up before that,
-run in the test process's own domain. A domain per test, not per session:
+run in a domain of their module's own (otherwise in the shell's ROS_DOMAIN_ID, which parallel
+workers all inherit). A domain per test, not per session:
 a participant that outlives its test (rclpy destroys the DDS participant only when its context
 is collected) must not answer the next test's service calls.
 
@@ -18,10 +19,6 @@ from mantis_rig.ros_env import claim_free_domain, release_domain
 
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
-# A domain of this test process's own, held while it runs, for whatever starts outside a
-# test's own domain: a module-scoped fixture is set up before the first test's domain is
-# claimed, and parallel workers all inherit the shell's ROS_DOMAIN_ID.
-os.environ['ROS_DOMAIN_ID'] = str(claim_free_domain())
 
 #: The project's own copies of the real trials (test/data/PROVENANCE.md says where from).
 DATA_DIR = Path(__file__).resolve().parent / 'data'
@@ -34,12 +31,23 @@ def data_file(rel) -> Path:
     return path
 
 
-@pytest.fixture(autouse=True)
-def own_ros_domain(monkeypatch):
+def _claimed_domain():
+    """Claim a free domain, set ROS_DOMAIN_ID to it while the fixture lasts, give it back."""
     domain = claim_free_domain()
-    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain))
-    yield domain
+    with pytest.MonkeyPatch.context() as env:
+        env.setenv('ROS_DOMAIN_ID', str(domain))
+        yield domain
     release_domain(domain)
+
+
+@pytest.fixture(scope='module', autouse=True)
+def module_ros_domain():
+    yield from _claimed_domain()
+
+
+@pytest.fixture(autouse=True)
+def own_ros_domain():
+    yield from _claimed_domain()
 
 
 def authors_values() -> dict:

@@ -26,7 +26,6 @@ import rclpy
 from mantis_rig.cli import main
 from mantis_rig.nodes.bringup import Stack, StackConfig
 from mantis_rig.nodes.trial_client import TrialClient
-from mantis_rig.ros_env import claim_free_domain, release_domain
 from mantis_sim.results import simulate
 from mantis_sim.scene import load_scene
 from mantis_sim.world import CAMERA_ORIGIN_MM
@@ -42,29 +41,24 @@ pytestmark = pytest.mark.timeout(600)
 def trial(tmp_path_factory):
     """(analysis report of the bag, the world's truth) of one simulated trial."""
     out = tmp_path_factory.mktemp('sim_trial')
-    domain = claim_free_domain()
-    with pytest.MonkeyPatch.context() as env:
-        env.setenv('ROS_DOMAIN_ID', str(domain))
-        env.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-        rclpy.init()
-        stack = Stack(StackConfig(scene=SCENE, real_time_factor=RTF,
-                                  supervisor={'out': str(out), 'operator_note': 'pytest'},
-                                  devices={'stage_node': {'move_speed_m_per_s': 2.0e-3}}),
-                      log_dir=out / 'logs')
-        client = TrialClient()
-        stack.add_node(client)
-        try:
-            stack.start()
-            started, message, final = client.run_trial(timeout_s=TRIAL_TIMEOUT_S)
-            assert started and final == 'done', (message, final, client.states)
-            world = stack.node('sim_world_node').world
-            truth = {'phase_start_s': world.phase_start_s, 'events': dict(world.events),
-                     'peak_time_s': world.peak_time_s}
-        finally:
-            stack.stop()
-            client.destroy_node()
-            rclpy.try_shutdown()
-            release_domain(domain)
+    rclpy.init()                      # on the module's domain (conftest.module_ros_domain)
+    stack = Stack(StackConfig(scene=SCENE, real_time_factor=RTF,
+                              supervisor={'out': str(out), 'operator_note': 'pytest'},
+                              devices={'stage_node': {'move_speed_m_per_s': 2.0e-3}}),
+                  log_dir=out / 'logs')
+    client = TrialClient()
+    stack.add_node(client)
+    try:
+        stack.start()
+        started, message, final = client.run_trial(timeout_s=TRIAL_TIMEOUT_S)
+        assert started and final == 'done', (message, final, client.states)
+        world = stack.node('sim_world_node').world
+        truth = {'phase_start_s': world.phase_start_s, 'events': dict(world.events),
+                 'peak_time_s': world.peak_time_s}
+    finally:
+        stack.stop()
+        client.destroy_node()
+        rclpy.try_shutdown()
     bag = next(p for p in out.iterdir() if p.name.startswith('trial_'))
     assert (bag / 'metadata.yaml').exists()
     batch = simulate(load_scene(SCENE)).metrics
