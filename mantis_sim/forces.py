@@ -155,11 +155,14 @@ class PublishedArmAirLoad:
 
     The centre of pressure is the midpoint of the tip (L3 along the arm) and of the point L5
     from b at the tendon attachment's angle beta, so off the arm's axis (7.6 mm from b for the
-    reference robot). With a the angle between its velocity v and the blade (that point to the
-    tip): C_D = 1.9 + 1.5 cos 2a (3.4 when v runs along the blade, 0.4 across it) and
-    |C_L| = 1.8 |sin 2a|; drag -1/2 rho S_a C_D |v| v, lift 1/2 rho S_a |C_L| |v|^2 normal to v,
-    always towards the same side of the blade. Below their speed threshold (1e-4 m/s) the load
-    is zero, as in theirs.
+    reference robot). Their velocity of that point is the true one turned by -90 degrees (their
+    Jacobian takes the points' positions where their derivatives belong, the same quarter turn
+    for both joints), and its generalised force is unchanged by the turn; their angle of attack
+    is measured from that turned velocity to the blade. In the true velocity's terms, with a the
+    angle between the velocity v and the blade (that point to the tip): C_D = 1.9 - 1.5 cos 2a
+    (0.4 along the blade, 3.4 across it), |C_L| = 1.8 |sin 2a|; drag -1/2 rho S_a C_D |v| v,
+    lift 1/2 rho S_a |C_L| |v|^2 normal to v, always on the tip's side (lift . blade >= 0).
+    Below their speed threshold (1e-4 m/s) the load is zero, as in theirs.
     """
 
     name = 'published_arm_air_load'
@@ -189,11 +192,10 @@ class PublishedArmAirLoad:
             return 0.0, 0.0, 0.0
         cos_a = max(-1.0, min(1.0, (v_t * self.blade[0] + v_n * self.blade[1]) / speed))
         a = math.acos(cos_a)
-        c_d = 1.9 + 1.5 * math.cos(2.0 * a)
+        c_d = 1.9 - 1.5 * math.cos(2.0 * a)
         c_l = abs(1.8 * math.sin(2.0 * a))
-        # lift along v turned by +-90 degrees, on the side opposite the blade's normal
-        l_t, l_n = -v_n, v_t
-        if l_t * -self.blade[1] + l_n * self.blade[0] > 0.0:
+        l_t, l_n = -v_n, v_t                      # v turned by +90 degrees
+        if l_t * self.blade[0] + l_n * self.blade[1] < 0.0:
             l_t, l_n = -l_t, -l_n
         f_t = self.half_rho_area * speed * (-c_d * v_t + c_l * l_t)
         f_n = self.half_rho_area * speed * (-c_d * v_n + c_l * l_n)

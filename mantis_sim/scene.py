@@ -43,7 +43,8 @@ EFFECTS = {
     'loadcell_dynamics': 'amplifier bandwidth, noise and ADC quantisation of the force signal',
     'camera_sampling': 'pixel quantisation of the tracked markers',
     'published_arm_air_load': 'the arm blade\'s air load in the authors\' published form (off-axis '
-                              'centre of pressure, C_D = 1.9 + 1.5 cos 2a, one-sided lift), '
+                              'centre of pressure, C_D 0.4 along the blade to 3.4 across it, '
+                              'one-sided lift), '
                               'replacing fluid_drag\'s blade term: to reproduce their simulation',
     'published_added_mass': 'entrained fluid in the authors\' published form (elliptic plates at '
                             'the centres of mass, lengths scaled by 1.8), instead of added_mass: '

@@ -40,32 +40,30 @@ def test_the_events_are_within_0_2_ms(published, ours):
 
 def test_the_tendon_force_matches_until_the_strike(published, ours):
     """Within 0.03 N through loading, unlatching and phase III (to 1591 ms); in the last 1.5 ms
-    before the force saturates, the strike's tension spike differs by up to 0.6 N (ours reaches
-    17 N 0.05 ms earlier)."""
+    before the force saturates, the strike's tension spike differs by up to 0.25 N (ours reaches
+    17 N 0.04 ms earlier)."""
     t = published['t']
     loading = t <= 1591.0
     force = np.interp(t[loading], ours.trajectory.t_ms, ours.trajectory.tendon_force_N)
     assert np.abs(force - published['F'][loading]).max() < 0.03
 
 
-def test_peak_speeds_are_within_1_2_percent_and_the_force_saturates(published, ours):
+def test_peak_speeds_are_within_1_percent(published, ours):
+    """Their air load with their quarter-turned velocity (PublishedArmAirLoad): +0.37 % and
+    +0.49 % today; with the velocity taken as the true one it was +1.07 % and +1.14 %."""
     tip = ours.metrics['peak_tip_speed_mps'] / published['tip'].max() - 1
     arm = ours.metrics['peak_arm_speed_radps'] / published['arm'] - 1
-    assert 0 < tip < 0.012 and 0 < arm < 0.012, (tip, arm)
+    assert abs(tip) < 0.01 and abs(arm) < 0.01, (tip, arm)
+
+
+def test_the_force_saturates_at_17_n(ours):
     assert ours.metrics['peak_tendon_force_N'] == pytest.approx(17.0, abs=1e-9)
     assert 'saturate' in [name for name, _ in ours.metrics['events']]
 
 
-@pytest.mark.xfail(strict=True, reason='issue 14 goal not met: the peak tip speed is 1.07 % high, '
-                   'the arm 1.14 % (their theta3 shift by the contact angle in A(theta3), not '
-                   'copied, is one candidate)')
-def test_peak_speeds_are_within_1_percent(published, ours):
-    assert abs(ours.metrics['peak_tip_speed_mps'] / published['tip'].max() - 1) < 0.01
-    assert abs(ours.metrics['peak_arm_speed_radps'] / published['arm'] - 1) < 0.01
-
-
 @pytest.mark.xfail(strict=True, reason='issue 14 goal not met: the tension spike before the '
-                   'saturation reaches 17 N 0.05 ms early: up to 0.6 N apart')
+                   'saturation reaches 17 N 0.04 ms early: up to 0.25 N apart where it rises '
+                   'at 20-30 N/ms (0.24 N with their theta3 shift in A(theta3) too)')
 def test_the_tendon_force_is_within_0_2_n_up_to_its_saturation(published, ours):
     t, F = published['t'], published['F']
     before = t < t[np.argmax(F >= 17.0 - 1e-9)]

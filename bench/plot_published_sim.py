@@ -1,0 +1,82 @@
+"""The scene published_s12 against the authors' published simulation, over the strike.
+
+Four panels (theta1, theta3, tip speed, tendon force) from the arm leaving contact to just past
+the peak tip speed, the published curves (their Fig. S12 .mat, test/data/published_sims) and
+this model's, and the figures of the README's table printed.
+
+    .venv/bin/python bench/plot_published_sim.py [--out docs/published_s12.png]
+"""
+import argparse
+from pathlib import Path
+import sys
+
+import numpy as np
+import scipy.io as sio
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from mantis_sim.results import simulate  # noqa: E402
+from mantis_sim.scene import load_scene  # noqa: E402
+
+PUBLISHED = ROOT / 'test' / 'data' / 'published_sims' / 'figS12_air_23mm.mat'
+L1_MM, L3_MM = 19.0, 18.66            # their tip-speed lengths (params of the .mat)
+WINDOW_MS = (1583.0, 1593.0)
+
+
+def published_curves() -> dict:
+    m = sio.loadmat(PUBLISHED, squeeze_me=True, struct_as_record=False)
+    w1, w3, th3 = m['dth1'], m['dth3'], m['th3']
+    tip = np.sqrt(L1_MM ** 2 * w1 ** 2 + L3_MM ** 2 * (w1 - w3) ** 2
+                  - 2 * L1_MM * L3_MM * w1 * (w1 - w3) * np.cos(th3))
+    return {'t_ms': m['t'], 'theta1': m['th1'], 'theta3': th3, 'tip': tip, 'force': m['F'],
+            'peak_arm_radps': float(np.abs(w3).max() * 1e3)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--out', type=Path, default=ROOT / 'docs' / 'published_s12.png')
+    args = parser.parse_args()
+    pub = published_curves()
+    run = simulate(load_scene('published_s12', ['integration.rtol=1e-9']))
+    tr = run.trajectory
+    ours = {'t_ms': tr.t_ms, 'theta1': tr.theta1, 'theta3': tr.theta3,
+            'tip': tr.tip_speed_mps, 'force': tr.tendon_force_N}
+
+    peak_pub = float(pub['tip'].max())
+    print(f"peak tip speed: published {peak_pub:.2f} m/s, published_s12 "
+          f"{run.metrics['peak_tip_speed_mps']:.2f} m/s "
+          f"({100 * (run.metrics['peak_tip_speed_mps'] / peak_pub - 1):+.2f} %)")
+    arm_pub = pub['peak_arm_radps']
+    print(f"peak arm speed: published {arm_pub:.0f} rad/s, published_s12 "
+          f"{run.metrics['peak_arm_speed_radps']:.0f} rad/s "
+          f"({100 * (run.metrics['peak_arm_speed_radps'] / arm_pub - 1):+.2f} %)")
+    saturated = pub['t_ms'] < pub['t_ms'][np.argmax(pub['force'] >= 17.0 - 1e-9)]
+    gap = np.abs(np.interp(pub['t_ms'], ours['t_ms'], ours['force']) - pub['force'])[saturated]
+    print(f'tendon force before it saturates: up to {gap.max():.2f} N apart')
+
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(2, 2, figsize=(10, 6.5), sharex=True)
+    panels = (('theta1', 'θ1 (rad)'), ('theta3', 'θ3 (rad)'), ('tip', 'tip speed (m/s)'),
+              ('force', 'tendon force (N)'))
+    for ax, (key, label) in zip(axes.flat, panels):
+        for curves, style, name in ((pub, 'k-', 'published (Fig. S12)'),
+                                    (ours, 'r--', 'published_s12')):
+            inside = (curves['t_ms'] >= WINDOW_MS[0]) & (curves['t_ms'] <= WINDOW_MS[1])
+            ax.plot(curves['t_ms'][inside], curves[key][inside], style, lw=1.4, label=name)
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    for ax in axes[1]:
+        ax.set_xlabel('time (ms)')
+    axes[0, 0].legend(loc='best', fontsize=8)
+    fig.suptitle('published_s12 against the authors\' published air run, over the strike')
+    fig.tight_layout()
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(args.out, dpi=110)
+    print(f'figure: {args.out}')
+
+
+if __name__ == '__main__':
+    main()
