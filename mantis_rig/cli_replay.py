@@ -34,10 +34,11 @@ def run_replay(args) -> int:
                            'priority')
     from rclpy.signals import SignalHandlerOptions
 
+    from .nodes.lean_node import LeanNode
     from .nodes.stopping import StopRequested, StopSignals
     signals = StopSignals('mantis replay').install()    # 130 / 143, not rclpy's handler
     rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node('mantis_replay')
+    node = LeanNode('mantis_replay')
     stop = threading.Event()
     relay = None
     try:

@@ -45,7 +45,8 @@ class LiveRelay:
 
     def __init__(self, address: str, ros_context=None, topics=TRIAL_TOPICS, name='mantis_rig'):
         import foxglove
-        import rclpy
+
+        from .nodes.lean_node import LeanNode
 
         host, port = parse_address(address)
         self._foxglove = foxglove.Context()
@@ -57,8 +58,7 @@ class LiveRelay:
             raise LiveError(f'--live {address}: cannot serve on {host}:{port}: '
                             f'{str(exc).removeprefix("FoxgloveError: ")}') from None
         self.host, self.port = host, self.server.port
-        self.node = rclpy.create_node('mantis_live', context=ros_context,
-                                      start_parameter_services=False)
+        self.node = LeanNode('mantis_live', context=ros_context, start_parameter_services=False)
         self.channels = {}
         for spec in topics:
             schema = foxglove.Schema(name=spec.type_name, encoding=SCHEMA_ENCODING,

@@ -7,6 +7,8 @@ from __future__ import annotations
 import bisect
 import math
 
+import numpy as np
+
 from .scene import Scene
 
 
@@ -118,6 +120,15 @@ class CommandedPull:
         t0, x, v, a = self.knots[i]
         dt = t - t0
         return x + v * dt + 0.5 * a * dt * dt, v + a * dt, a
+
+    def pulled_mm(self, times_ms: np.ndarray) -> np.ndarray:
+        """The pulled distance (mm) at each of many times (ms): pulled()[0], vectorised for
+        the load cell's stream, which asks for every sample while the world holds still."""
+        knots = np.asarray(self.knots)
+        i = np.searchsorted(knots[:, 0], times_ms, side='right') - 1
+        t0, x, v, a = knots[np.maximum(i, 0)].T
+        dt = times_ms - t0
+        return np.where(times_ms <= 0.0, 0.0, x + v * dt + 0.5 * a * dt * dt)
 
     def breakpoints(self) -> list[float]:
         return [k[0] for k in self.knots[1:]]

@@ -186,7 +186,7 @@ class World:
                                self.scene.spring.k_Nmm_per_rad)
 
     def _pulled_mm(self, times_ms: np.ndarray) -> np.ndarray:
-        return np.array([self._drive.pulled(t)[0] for t in times_ms])
+        return self._drive.pulled_mm(times_ms)
 
     def _check_times(self, times_s) -> np.ndarray:
         times_ms = np.atleast_1d(np.asarray(times_s, dtype=float)) * 1e3

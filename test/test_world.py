@@ -4,6 +4,7 @@ import math
 import numpy as np
 import pytest
 
+from mantis_sim.drive import CommandedPull
 from mantis_sim.mechanism import Mechanism
 from mantis_sim.model import SimulationError
 from mantis_sim.results import simulate
@@ -168,3 +169,16 @@ def test_the_load_cell_filter_is_lfilter():
             previous = float(y[-1])
         got.append(y)
     assert np.allclose(np.concatenate(got), expected, rtol=1e-12, atol=1e-12)
+
+
+def test_the_commanded_pull_at_many_times_is_its_pull_at_each():
+    """pulled_mm (the load cell's stream asks for every sample while the world holds) against
+    pulled() one time at a time, over ramps, a move, a stop and a reversal."""
+    drive = CommandedPull(2e-6)
+    drive.command(100.0, 2.3e-3)
+    drive.move_to(3000.0, 1.0, 5e-3)
+    drive.command(5000.0, 0.0)
+    drive.command(5200.0, -1e-3)
+    times_ms = np.concatenate([[-1.0, 0.0], np.linspace(0.0, 8000.0, 20001)])
+    one_by_one = np.array([drive.pulled(t)[0] for t in times_ms])
+    assert np.array_equal(drive.pulled_mm(times_ms), one_by_one)

@@ -45,6 +45,8 @@ from rclpy.parameter import Parameter
 from mantis_rig.hardware.backends import BACKENDS, check_backend
 from mantis_rig.hardware.interfaces import DeviceError
 
+from .lean_node import WithoutDefaultEventHandlers
+
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 DEFAULT_SCENE = 'air_23mm_rig'
 SUCCESS = TransitionCallbackReturn.SUCCESS
@@ -109,7 +111,7 @@ def time_msg(t_s: float) -> Time:
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
-class DeviceNode(LifecycleNode):
+class DeviceNode(WithoutDefaultEventHandlers, LifecycleNode):
     DEVICE = 'device'
     PARAMETERS: tuple = ()
     def __init__(self, node_name: str, *, world_port=None, sim_clock=None, **kwargs):

@@ -3,11 +3,12 @@ run_node, the main() of every node process.
 
 rclpy's MultiThreadedExecutor costs about 2 ms of CPU per callback, the SingleThreadedExecutor
 well under half of that (bench/bench_throughput.py --executor). Nodes whose callbacks only
-record, publish or hand work to their own threads (supervisor, sim world, recorder, clients)
+record, publish or hand work to their own threads (supervisor, sim world, clients)
 run on a SingleThreadedExecutor; the device nodes, whose services block (homing, tare,
 simulated backends waiting for the world), need the MultiThreadedExecutor. (rclpy's
 experimental EventsExecutor is cheaper still, but in rclpy 7.1 a publish from another thread
-deadlocks against its spin(): the supervisor publishes from its trial thread.)
+deadlocks against its spin(): the supervisor publishes from its trial thread. The side nodes,
+which only subscribe, do take it: SideNode.)
 """
 from __future__ import annotations
 
@@ -24,10 +25,12 @@ from rclpy.executors import (
     ShutdownException,
     SingleThreadedExecutor,
 )
+from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
 from mantis_rig.ros_env import claim_local_domain
 
+from .lean_node import LeanNode
 from .stopping import StopRequested, StopSignals, watch_parent
 
 USAGE_ERROR = 2
@@ -85,17 +88,21 @@ class Spinner:
 
 
 class SideNode:
-    """A node of its own beside `owner`, spun by a SingleThreadedExecutor in its own thread.
+    """A node of its own beside `owner`, spun by rclpy's EventsExecutor in its own thread.
 
     For high-rate topics a node with blocking services must not route through its
     MultiThreadedExecutor, which rebuilds its wait set in Python over all of the node's entities
-    on every wake-up (100 force blocks a second cost a simulated DAQ node a whole core).
-    Callbacks run in the side node's thread; close() stops it and destroys the node."""
+    on every wake-up (100 force blocks a second cost a simulated DAQ node a whole core). A side
+    node only subscribes: its callbacks run in its thread, and nothing publishes on it from
+    another thread (the case in which rclpy 7.1's EventsExecutor deadlocks), so it takes the
+    EventsExecutor, which waits and dispatches in C++: the recorder's thread, which writes every
+    message of a trial, costs half the CPU it did on a SingleThreadedExecutor. close() stops it
+    and destroys the node."""
 
     def __init__(self, owner, suffix: str):
-        self.node = rclpy.create_node(f'{owner.get_name()}_{suffix}', context=owner.context,
-                                      start_parameter_services=False)
-        executor = SingleThreadedExecutor(context=owner.context)
+        self.node = LeanNode(f'{owner.get_name()}_{suffix}', context=owner.context,
+                             start_parameter_services=False)
+        executor = EventsExecutor(context=owner.context)
         executor.add_node(self.node)
         self._spinner = Spinner(executor, suffix)
 

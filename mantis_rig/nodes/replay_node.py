@@ -19,8 +19,10 @@ from rclpy.parameter import Parameter
 from mantis_rig.replay import BagPlayer, ReplayError
 from mantis_rig.ros_env import claim_local_domain
 
+from .lean_node import WithoutDefaultEventHandlers
 
-class ReplayNode(Node):
+
+class ReplayNode(WithoutDefaultEventHandlers, Node):
     def __init__(self):
         super().__init__('replay_node')
         self.declare_parameter('bag', '')

@@ -27,6 +27,8 @@ from mantis_rig.recording.force_block import force_block_from_msg
 from mantis_sim.scene import load_scene
 from mantis_sim.world import World
 
+from .lean_node import WithoutDefaultEventHandlers
+
 DEFAULT_SCENE = 'air_23mm_rig'
 DAQ_FORCE_TOPIC = '/loadcell/force_block'
 
@@ -46,7 +48,7 @@ PARAMETERS = (
 STREAM_ALIVE_S = 1.0
 
 
-class SimWorldNode(Node):
+class SimWorldNode(WithoutDefaultEventHandlers, Node):
     def __init__(self, node_name: str = 'sim_world_node', **kwargs):
         super().__init__(node_name, **kwargs)
         for spec in PARAMETERS:

@@ -29,6 +29,7 @@ from mantis_rig.recording.force_block import force_block_from_msg
 from mantis_rig.recording.marker_block import marker_block_from_msg
 
 from .executors import SideNode, light_executor, run_node
+from .lean_node import WithoutDefaultEventHandlers
 from .log_space import free_space_problem
 from .recorder import LATCHED, RELIABLE, Recorder
 from .rig_client import RigClient
@@ -62,7 +63,7 @@ def bag_directory(out: str) -> Path:
     return path
 
 
-class SupervisorNode(Node):
+class SupervisorNode(WithoutDefaultEventHandlers, Node):
     def __init__(self, node_name: str = NODE_NAME, **kwargs):
         super().__init__(node_name, **kwargs)
         self._group = ReentrantCallbackGroup()

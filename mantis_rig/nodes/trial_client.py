@@ -10,11 +10,12 @@ from rclpy.node import Node
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
+from .lean_node import WithoutDefaultEventHandlers
 from .recorder import LATCHED, RELIABLE
 from .supervisor_node import STATUS_NAME
 
 
-class TrialClient(Node):
+class TrialClient(WithoutDefaultEventHandlers, Node):
     def __init__(self, node_name: str = 'mantis_trial_client', **kwargs):
         super().__init__(node_name, **kwargs)
         self.states: list[str] = []
