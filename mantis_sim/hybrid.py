@@ -15,7 +15,6 @@ import math
 import time
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from .model import Dynamics, Model, SimulationError
 from .scene import Scene
@@ -91,6 +90,12 @@ class HybridSimulator:
         self._cache_key = None
         self._cache_value = None
         self._constrained_memo: dict = {}
+        # Imported by a simulator, not with the module: scipy.integrate costs a process about
+        # 0.65 CPU s, which the processes of a trial that only name the simulation (the command
+        # line and supervisor of the multi-process layout) need not pay; a simulating process
+        # pays it when it builds its world, before the trial, not at its first integration.
+        from scipy.integrate import solve_ivp
+        self._solve_ivp = solve_ivp
 
     # --- mode systems ---------------------------------------------------------------------------
     def _constrained(self, mode: Mode) -> bool:
@@ -424,7 +429,7 @@ class HybridSimulator:
         start_stretch = tg.length - l_free
         start_rate = tg.d1 * s[2] + tg.d3 * s[3] - l_free_dot
         events = self._events(mode, phase, after_peak, start_stretch, start_rate)
-        sol = solve_ivp(self._rhs(mode), (t0, t1), y0, method=self.method, rtol=self.rtol,
+        sol = self._solve_ivp(self._rhs(mode), (t0, t1), y0, method=self.method, rtol=self.rtol,
                         atol=atol, events=events, dense_output=self.dense)
         if sol.status == -1:
             raise SimulationError(f'integration failed at t = {sol.t[-1]:.6f} ms in phase '
