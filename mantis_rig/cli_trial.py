@@ -232,6 +232,8 @@ class _TrialRun:
         self.bag = Path(message.rsplit('logging to ', 1)[-1])
         print(f'bag: {self.bag}', flush=True)
         self.final = client.wait_for_end(timeout_s, alive=stack.check_processes)
+        if self.final not in (None, 'done'):
+            _name_a_dying_process(stack)
         if self.final is None:
             client.call('abort', timeout_s=5.0)
             raise StackError(f'no end of trial within {timeout_s} s; aborted')
@@ -240,6 +242,21 @@ class _TrialRun:
                 raise StackError(client.reason)
             raise StackError(f'the trial ended ({self.final}) but its log {self.bag} was not '
                              f'closed within 30 s')
+
+
+DYING_PROCESS_GRACE_S = 1.0     # how long an aborted trial waits for a node process to end
+
+
+def _name_a_dying_process(stack) -> None:
+    """A trial aborted because a node process is going down (killed by its own signal: its
+    device nodes leave the active state, the supervisor aborts) is reported as that process's
+    end, not as a device fault: wait briefly for it to end (StackError names it)."""
+    deadline = time.monotonic() + (DYING_PROCESS_GRACE_S if stack.processes else 0.0)
+    while True:
+        stack.check_processes()
+        if time.monotonic() >= deadline:
+            return
+        time.sleep(0.05)
 
 
 def _supervisor_bag(stack) -> Path | None:

@@ -32,6 +32,7 @@ from mantis_rig.hardware.interfaces import (
     SafetyLimitError,
     StageLimits,
 )
+from mantis_rig.nodes.clock_ticker import ClockTicker
 from mantis_rig.nodes.device_node import ERROR, OK, WARN, DeviceNode, Param
 from mantis_rig.nodes.executors import SideNode, run_node
 from mantis_rig.recording.force_block import force_block_from_msg
@@ -73,7 +74,7 @@ class StageNode(DeviceNode):
                             callback_group=self.services_group)
         self.create_service(Trigger, '/stage/stop', self._on_stop,
                             callback_group=self.services_group)
-        self._timer = None
+        self._state_ticker = None
         self._move: threading.Thread | None = None
         self._move_lock = threading.Lock()
         self._last_state = None
@@ -107,13 +108,14 @@ class StageNode(DeviceNode):
         self._refused = None
         self._reported_trip = None
         self._publish_state()
-        self._timer = self.create_timer(1.0 / self.param('joint_state_rate_hz'),
-                                        self._publish_state)
+        self._state_ticker = ClockTicker(self.get_clock(),
+                                         1.0 / self.param('joint_state_rate_hz'),
+                                         self._publish_state, 'stage-joint-state')
 
     def stop_streaming(self) -> None:
-        if self._timer is not None:
-            self.destroy_timer(self._timer)
-            self._timer = None
+        if self._state_ticker is not None:
+            self._state_ticker.stop()
+            self._state_ticker = None
         self._stop_motion()
 
     def diagnostic_values(self) -> dict:
