@@ -129,12 +129,12 @@ class HybridSimulator:
         return list(s)
 
     def _unpack(self, mode: Mode, t, y) -> tuple:
+        if not mode.latched:
+            return tuple(y)                 # the integrated state is the full state
         d = self._dynamics(mode, t, y)
         if self._constrained(mode):
             return (d.th1, d.th3, d.w1, 0.0, y[0], y[1])
-        if mode.latched:
-            return (y[0], d.th3, y[1], 0.0, y[2], y[3])
-        return tuple(y)
+        return (y[0], d.th3, y[1], 0.0, y[2], y[3])
 
     def _rhs(self, mode: Mode):
         # float(t), y.tolist(): the model's scalar math runs on Python floats, several times
@@ -473,6 +473,9 @@ class HybridSimulator:
 class _DenseSegment:
     def __init__(self, sim: HybridSimulator, mode: Mode, interpolant):
         self.sim, self.mode, self.interpolant = sim, mode, interpolant
+        # the arm free: the integrated state starts with (theta1, theta3), and the interpolant
+        # takes many times at once
+        self.integrates_angles = not mode.latched
 
     def __call__(self, t: float) -> tuple:
         return self.sim._unpack(self.mode, t, tuple(self.interpolant(t)))

@@ -144,11 +144,7 @@ class World:
     def marker_positions_m(self, times_s) -> dict:
         """Marker positions (name -> (n, 2) m) in the camera frame at each time."""
         th1, th3 = self.joint_angles_rad(times_s)
-        out = {name: np.empty((th1.size, 2)) for name in (*BODY_MARKERS_MM, *ARM_MARKERS_MM)}
-        for k in range(th1.size):
-            for name, xy in self._markers_mm(th1[k], th3[k]).items():
-                out[name][k] = xy
-        return {name: xy * 1e-3 for name, xy in out.items()}
+        return {name: xy * 1e-3 for name, xy in self._markers_mm(th1, th3).items()}
 
     def joint_angles_rad(self, times_s) -> tuple[np.ndarray, np.ndarray]:
         """(theta1, theta3) at each time (within the kept history, not past time_s)."""
@@ -160,10 +156,15 @@ class World:
             th3[~moving] = self._held.th3
         segments = self._sim.run_data.segments
         index = self._segment_index(times_ms)
-        for k in np.flatnonzero(moving):
-            seg = segments[index[k]]
-            t = times_ms[k]
-            th1[k], th3[k] = seg.dense(min(max(t, seg.t[0]), seg.t[-1]))[:2]
+        for i in np.unique(index[moving]):
+            seg = segments[i]
+            at = np.flatnonzero(moving & (index == i))
+            t = np.clip(times_ms[at], seg.t[0], seg.t[-1])
+            if seg.dense.integrates_angles:           # free arm: one call for all the times
+                th1[at], th3[at] = seg.dense.interpolant(t)[:2]
+                continue
+            for k, tk in zip(at, t):
+                th1[k], th3[k] = seg.dense(tk)[:2]
         return th1, th3
 
     # --- internals -------------------------------------------------------------------------
@@ -213,15 +214,17 @@ class World:
             self._tension_cache[key] = (knots, forces)
         return self._tension_cache[key]
 
-    def _markers_mm(self, th1: float, th3: float) -> dict:
-        b = (self._mech.L1 * math.cos(th1), self._mech.L1 * math.sin(th1))
+    def _markers_mm(self, th1: np.ndarray, th3: np.ndarray) -> dict:
+        """Marker positions (name -> (n, 2) mm, camera frame) for arrays of joint angles."""
+        b = (self._mech.L1 * np.cos(th1), self._mech.L1 * np.sin(th1))
         frames = {'mb': ((0.0, 0.0), th1), 'ma': (b, th1 + math.pi - th3)}
         out = {}
         for name, (across, along) in {**BODY_MARKERS_MM, **ARM_MARKERS_MM}.items():
             origin, axis = frames[name[:2]]
-            x = origin[0] + along * math.cos(axis) + across * math.sin(axis)
-            y = origin[1] + along * math.sin(axis) - across * math.cos(axis)
-            out[name] = (x + CAMERA_ORIGIN_MM[0], -y + CAMERA_ORIGIN_MM[1])
+            cos, sin = np.cos(axis), np.sin(axis)
+            x = origin[0] + along * cos + across * sin
+            y = origin[1] + along * sin - across * cos
+            out[name] = np.column_stack([x + CAMERA_ORIGIN_MM[0], -y + CAMERA_ORIGIN_MM[1]])
         return out
 
     def _forget_before(self, t_ms: float) -> None:
