@@ -169,7 +169,7 @@ def _trial(config, args, signals) -> int:
         stack.start()
         if relay is not None and stack.rig is not None:
             relay.follow_clock(stack.rig.clock)
-        run.follow(client, stack, args.timeout)
+        run.follow(client, stack, args.timeout, stopping=lambda: signals.first is not None)
     except StopRequested as stop:
         run.reason = stop.reason
     except StackError as exc:
@@ -217,7 +217,7 @@ class _TrialRun:
         self.error = ''
         self.reason = ''
 
-    def follow(self, client, stack, timeout_s: float) -> None:
+    def follow(self, client, stack, timeout_s: float, stopping=lambda: False) -> None:
         from .nodes.bringup import StackError
         from .nodes.supervisor_node import LOG_WRITE_FAILED
 
@@ -232,7 +232,7 @@ class _TrialRun:
         self.bag = Path(message.rsplit('logging to ', 1)[-1])
         print(f'bag: {self.bag}', flush=True)
         self.final = client.wait_for_end(timeout_s, alive=stack.check_processes)
-        if self.final not in (None, 'done'):
+        if self.final not in (None, 'done') and not stopping():
             _name_a_dying_process(stack)
         if self.final is None:
             client.call('abort', timeout_s=5.0)

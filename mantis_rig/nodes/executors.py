@@ -112,6 +112,18 @@ class SideNode:
 
 
 STACK_PARENT_ENV = 'MANTIS_STACK_PARENT'    # set by a stack for its node processes
+SIGNAL_CHECK_S = 0.05       # how soon a node process's main thread sees a stop signal
+
+
+def spin_in_slices(executor) -> None:
+    """executor.spin() in slices of SIGNAL_CHECK_S, until its context shuts down.
+
+    A node process's stop signals are handled in Python (run_node), and Python runs a handler
+    only when the main thread is between bytecodes; rclpy's wait blocks in C until one of the
+    executor's entities is ready, which in a quiet node is its next timer: the simulated rig
+    stopped its stage up to a second after SIGINT (the world's 1 Hz diagnostics)."""
+    while executor.context.ok():
+        executor.spin_once(timeout_sec=SIGNAL_CHECK_S)
 
 
 def run_node(node_class, args=None, make_executor=None) -> int:
@@ -143,7 +155,7 @@ def run_node(node_class, args=None, make_executor=None) -> int:
         else:
             executor = make_executor() if make_executor else threaded_executor(NODE_THREADS)
             executor.add_node(node)
-            executor.spin()
+            spin_in_slices(executor)
     except StopRequested as stop:
         status = stop.exit_status
         _call(node, 'emergency_stop')

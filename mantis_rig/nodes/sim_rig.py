@@ -22,7 +22,7 @@ from rclpy.parameter import Parameter
 
 from mantis_rig.hardware.local_world import LocalWorldPort
 
-from .executors import Spinner, light_executor, run_node, threaded_executor
+from .executors import Spinner, light_executor, run_node, spin_in_slices, threaded_executor
 from .shared_clock import SharedSimClock
 from .sim_world_node import SimWorldNode
 
@@ -98,7 +98,7 @@ class SimRig:
         self.add_to(light, devices)
         spinner = Spinner(devices, 'sim-rig-devices')
         try:
-            light.spin()
+            spin_in_slices(light)
         finally:
             spinner.stop()
             light.shutdown(timeout_sec=0)
