@@ -244,13 +244,16 @@ class _TrialRun:
                              f'closed within 30 s')
 
 
-DYING_PROCESS_GRACE_S = 1.0     # how long an aborted trial waits for a node process to end
+DYING_PROCESS_GRACE_S = 1.0     # how long an aborted multi-process trial watches its processes
 
 
 def _name_a_dying_process(stack) -> None:
-    """A trial aborted because a node process is going down (killed by its own signal: its
-    device nodes leave the active state, the supervisor aborts) is reported as that process's
-    end, not as a device fault: wait briefly for it to end (StackError names it)."""
+    """A trial aborted because a device node left the active state may have lost it to its
+    process going down (killed by its own signal: the supervisor hears the node's transition
+    before the process has exited). That is reported as the process's end, not as a device
+    fault. Which it was shows only once the process has ended or not, so every aborted trial of
+    a stack with node processes watches them for DYING_PROCESS_GRACE_S (an abort for another
+    reason is reported that much later); StackError names a process that ended."""
     deadline = time.monotonic() + (DYING_PROCESS_GRACE_S if stack.processes else 0.0)
     while True:
         stack.check_processes()

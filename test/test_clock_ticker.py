@@ -72,3 +72,19 @@ def test_on_wall_time_it_ticks_at_its_period():
     # on a grid of 20 ms (a late tick does not move the grid): never faster than the grid
     since_first_s = [(t - ticks[0]) * 1e-9 for t in ticks]
     assert all(s > (k - 1) * 0.02 for k, s in enumerate(since_first_s)), since_first_s
+
+
+def test_a_backward_jump_starts_the_period_afresh():
+    """As an rclpy timer: after the clock jumps back (a bag replayed, a clock reset) the next
+    tick is one period after the new time, not when the clock regains the old due time."""
+    clock, ticks = simulated_clock(10.0), []
+    ticker = ClockTicker(clock, 0.01, lambda: ticks.append(clock.now().nanoseconds), 'back')
+    try:
+        clock.set_ros_time_override(Time(nanoseconds=10_010_000_000))
+        wait_for(lambda: len(ticks) == 1)
+        clock.set_ros_time_override(Time(nanoseconds=1_000_000_000))     # 9 s back
+        clock.set_ros_time_override(Time(nanoseconds=1_010_000_000))
+        wait_for(lambda: len(ticks) == 2)
+        assert ticks[1] == 1_010_000_000
+    finally:
+        ticker.stop()

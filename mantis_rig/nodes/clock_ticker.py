@@ -6,15 +6,17 @@ device nodes: about forty services). The stage's 100 Hz joint state cost the dev
 0.6 CPU s in a 7 s simulated trial; from a ClockTicker it costs the publishes alone.
 
 The period is in the clock's time: simulated time when the clock follows the simulated world
-(it is woken by each time update), wall time otherwise (it sleeps until the tick is due). Like
-an rclpy timer, it skips ticks it could not keep up with rather than running them in a burst.
+(it is woken by each time update and otherwise only looks at its stop flag every CHECK_S of
+wall time), wall time otherwise (it sleeps until the tick is due). Like an rclpy timer, it
+skips ticks it could not keep up with rather than running them in a burst, and it starts its
+period afresh when the clock jumps back or switches between simulated and system time.
 """
 from __future__ import annotations
 
 import sys
 import threading
 
-from rclpy.clock import JumpThreshold
+from rclpy.clock import ClockChange, JumpThreshold
 from rclpy.duration import Duration
 
 CHECK_S = 0.05          # longest wall-time wait: how soon a stop (or a missed update) is seen
@@ -28,15 +30,20 @@ class ClockTicker:
         self._tick = tick
         self._wake = threading.Condition()
         self._stopped = False
+        self._restart_at: int | None = None     # the clock's time (ns) at a jump back
         self._jumps = clock.create_jump_callback(
-            JumpThreshold(min_forward=Duration(nanoseconds=1), min_backward=None,
-                          on_clock_change=True),
+            JumpThreshold(min_forward=Duration(nanoseconds=1),
+                          min_backward=Duration(nanoseconds=-1), on_clock_change=True),
             post_callback=self._on_time_update)
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
 
-    def _on_time_update(self, _jump) -> None:
+    def _on_time_update(self, jump) -> None:
         with self._wake:
+            if (jump.delta.nanoseconds < 0
+                    or jump.clock_change in (ClockChange.ROS_TIME_ACTIVATED,
+                                             ClockChange.ROS_TIME_DEACTIVATED)):
+                self._restart_at = self._clock.now().nanoseconds
             self._wake.notify()
 
     def _run(self) -> None:
@@ -46,8 +53,13 @@ class ClockTicker:
                 if self._stopped:
                     return
                 now = self._clock.now().nanoseconds
+                if self._restart_at is not None:
+                    due, self._restart_at = self._restart_at + self._period_ns, None
                 if now < due:
-                    self._wake.wait(min((due - now) * 1e-9, CHECK_S))
+                    # simulated time moves only by updates, which notify: a wall-time wait for
+                    # the remaining simulated time would poll while the world holds still
+                    simulated = getattr(self._clock, 'ros_time_is_active', False)
+                    self._wake.wait(CHECK_S if simulated else min((due - now) * 1e-9, CHECK_S))
                     continue
             try:
                 self._tick()

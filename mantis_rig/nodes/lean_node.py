@@ -5,9 +5,11 @@ rclpy gives every publisher and subscription one handler per event kind it can r
 and add to a new wait set on every wake-up. On the simulated rig they were a third of the
 entities the device nodes' executor rebuilt its wait set from on each message, and dropping
 them saved 16 % of a whole trial's CPU (bench/bench_trial.py). Their only work is a warning
-when a peer with an incompatible QoS or type appears; the topics' QoS is documented in
-docs/ros_interfaces.md, and the peer's own handler (ros2 topic echo, a bag recorder) still
-warns. A caller that wants handlers passes ``event_callbacks`` as usual.
+when a peer with an incompatible QoS or type appears. A peer outside this package (ros2 topic
+echo, a bag recorder) still warns with its own handler; between two of our nodes a mismatch
+would be silent, so their QoS is fixed in code, documented in docs/ros_interfaces.md, and the
+trial tests check that every topic reaches the bag. A caller that wants handlers passes
+``event_callbacks`` as usual.
 """
 from __future__ import annotations
 

@@ -25,6 +25,7 @@ from mantis_rig.hardware.local_world import LocalWorldPort
 from .executors import Spinner, light_executor, run_node, spin_in_slices, threaded_executor
 from .shared_clock import SharedSimClock
 from .sim_world_node import SimWorldNode
+from .stopping import StopRequested
 
 DEVICE_CLASSES = {'stage_node': 'StageNode', 'loadcell_node': 'LoadcellNode',
                   'camera_node': 'CameraNode'}
@@ -99,6 +100,9 @@ class SimRig:
         spinner = Spinner(devices, 'sim-rig-devices')
         try:
             spin_in_slices(light)
+        except StopRequested:
+            self.emergency_stop()     # first: stopping the threads below may take seconds
+            raise
         finally:
             spinner.stop()
             light.shutdown(timeout_sec=0)

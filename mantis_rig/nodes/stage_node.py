@@ -113,9 +113,9 @@ class StageNode(DeviceNode):
                                          self._publish_state, 'stage-joint-state')
 
     def stop_streaming(self) -> None:
-        if self._state_ticker is not None:
-            self._state_ticker.stop()
-            self._state_ticker = None
+        ticker, self._state_ticker = self._state_ticker, None    # deactivate and destroy race
+        if ticker is not None:
+            ticker.stop()
         self._stop_motion()
 
     def diagnostic_values(self) -> dict:
