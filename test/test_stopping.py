@@ -276,3 +276,24 @@ def test_mantis_trial_exits_1_with_one_line_when_the_log_cannot_be_written(trial
     assert len(ours) == 1, stderr
     assert re.fullmatch('mantis trial: ' + LOG_FAILED.format(cause='File too large'), ours[0])
     assert [pid for pid in run.children() if running(pid)] == []
+
+
+def test_a_deferred_first_signal_is_raised_where_the_spin_loop_asks_for_it():
+    """Node processes defer the first signal (run_node): raised from the handler it could land
+    inside rclpy's C++ message conversion, which turned it into a RuntimeError (the supervisor
+    closed its trial as 'supervisor shutting down', with a traceback)."""
+    from mantis_rig.nodes.stopping import StopRequested, StopSignals
+    saved = {signum: signal.getsignal(signum) for signum in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        signals = StopSignals('test').install(deferred=True)
+        signals.raise_if_stopped()                       # nothing yet
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.01)                                 # the handler runs, and only notes it
+        with pytest.raises(StopRequested) as stop:
+            signals.raise_if_stopped()
+        assert stop.value.exit_status == 143
+        signals.shield()
+        signals.raise_if_stopped()                       # the stop is under way: not again
+    finally:
+        for signum, handler in saved.items():
+            signal.signal(signum, handler)

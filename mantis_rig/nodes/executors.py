@@ -115,14 +115,16 @@ STACK_PARENT_ENV = 'MANTIS_STACK_PARENT'    # set by a stack for its node proces
 SIGNAL_CHECK_S = 0.05       # how soon a node process's main thread sees a stop signal
 
 
-def spin_in_slices(executor) -> None:
-    """executor.spin() in slices of SIGNAL_CHECK_S, until its context shuts down.
+def spin_in_slices(executor, check_stop=lambda: None) -> None:
+    """executor.spin() in slices of SIGNAL_CHECK_S, until its context shuts down; between
+    slices ``check_stop()`` (StopSignals.raise_if_stopped) may raise the stop a signal asked for.
 
     A node process's stop signals are handled in Python (run_node), and Python runs a handler
     only when the main thread is between bytecodes; rclpy's wait blocks in C until one of the
     executor's entities is ready, which in a quiet node is its next timer: the simulated rig
     stopped its stage up to a second after SIGINT (the world's 1 Hz diagnostics)."""
     while executor.context.ok():
+        check_stop()
         executor.spin_once(timeout_sec=SIGNAL_CHECK_S)
 
 
@@ -140,7 +142,8 @@ def run_node(node_class, args=None, make_executor=None) -> int:
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     signals = StopSignals(node_class.__name__,
-                          emergency_stop=lambda: _call(node, 'emergency_stop')).install()
+                          emergency_stop=lambda: _call(node, 'emergency_stop')
+                          ).install(deferred=True)
     if os.environ.get(STACK_PARENT_ENV, '').isdigit():
         watch_parent(int(os.environ[STACK_PARENT_ENV]))
     status = 0
@@ -150,12 +153,13 @@ def run_node(node_class, args=None, make_executor=None) -> int:
         except (ValueError, InvalidParameterValueException) as exc:
             print(f'{node_class.__name__}: {exc}', file=sys.stderr)
             return USAGE_ERROR
+        signals.raise_if_stopped()
         if hasattr(node, 'spin'):            # several nodes that spin themselves (sim_rig)
-            node.spin()
+            node.spin(signals.raise_if_stopped)
         else:
             executor = make_executor() if make_executor else threaded_executor(NODE_THREADS)
             executor.add_node(node)
-            spin_in_slices(executor)
+            spin_in_slices(executor, signals.raise_if_stopped)
     except StopRequested as stop:
         status = stop.exit_status
         _call(node, 'emergency_stop')

@@ -91,15 +91,15 @@ class SimRig:
             if node.get_name() == 'stage_node':
                 node.emergency_stop()
 
-    def spin(self) -> None:
+    def spin(self, check_stop=lambda: None) -> None:
         """Spin until the context shuts down (a process of its own): the device nodes in a
-        thread, the world here, where a stop signal arrives."""
+        thread, the world here, where ``check_stop()`` raises the stop a signal asked for."""
         light = light_executor(self.world_node.context)
         devices = threaded_executor(DEVICE_THREADS, self.world_node.context)
         self.add_to(light, devices)
         spinner = Spinner(devices, 'sim-rig-devices')
         try:
-            spin_in_slices(light)
+            spin_in_slices(light, check_stop)
         except StopRequested:
             self.emergency_stop()     # first: stopping the threads below may take seconds
             raise

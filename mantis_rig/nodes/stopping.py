@@ -49,12 +49,23 @@ class StopSignals:
         self.emergency_stop = emergency_stop
         self.first: Optional[StopRequested] = None
         self._shielded = False
+        self._deferred = False
         self._lock = threading.Lock()
 
-    def install(self) -> StopSignals:
+    def install(self, deferred: bool = False) -> StopSignals:
+        """deferred: the first signal is only noted, and `raise_if_stopped()` raises it where
+        the caller knows it is safe to (a node process's spin loop). Raised from the handler, it
+        can land inside rclpy's C++ message conversion, which turns it into a RuntimeError: the
+        supervisor then closed its trial as 'supervisor shutting down', with a traceback."""
+        self._deferred = deferred
         for signum in SIGNAL_NAMES:
             signal.signal(signum, self._on_signal)
         return self
+
+    def raise_if_stopped(self) -> None:
+        """Raise the first signal's StopRequested, if one came (and the stop is not under way)."""
+        if self.first is not None and not self._shielded:
+            raise self.first
 
     def shield(self) -> None:
         """The orderly stop is under way: from now on a first signal is only noted (see
@@ -65,7 +76,7 @@ class StopSignals:
         with self._lock:
             first, self.first = self.first, self.first or StopRequested(signum)
         if first is None:
-            if self._shielded:
+            if self._shielded or self._deferred:
                 return
             raise self.first
         self._exit_now(signum)
