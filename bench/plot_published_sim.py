@@ -11,26 +11,24 @@ from pathlib import Path
 import sys
 
 import numpy as np
-import scipy.io as sio
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / 'test'))
+
+from conftest import published_s12_run  # noqa: E402
 
 from mantis_sim.results import simulate  # noqa: E402
 from mantis_sim.scene import load_scene  # noqa: E402
 
-PUBLISHED = ROOT / 'test' / 'data' / 'published_sims' / 'figS12_air_23mm.mat'
-L1_MM, L3_MM = 19.0, 18.66            # their tip-speed lengths (params of the .mat)
 WINDOW_MS = (1583.0, 1593.0)
 
 
 def published_curves() -> dict:
-    m = sio.loadmat(PUBLISHED, squeeze_me=True, struct_as_record=False)
-    w1, w3, th3 = m['dth1'], m['dth3'], m['th3']
-    tip = np.sqrt(L1_MM ** 2 * w1 ** 2 + L3_MM ** 2 * (w1 - w3) ** 2
-                  - 2 * L1_MM * L3_MM * w1 * (w1 - w3) * np.cos(th3))
-    return {'t_ms': m['t'], 'theta1': m['th1'], 'theta3': th3, 'tip': tip, 'force': m['F'],
-            'peak_arm_radps': float(np.abs(w3).max() * 1e3)}
+    run = published_s12_run()
+    return {'t_ms': run['t_ms'], 'theta1': run['theta1'], 'theta3': run['theta3'],
+            'tip': run['tip_mps'], 'force': run['force_N'],
+            'peak_arm_radps': float(np.abs(run['omega3']).max() * 1e3)}
 
 
 def main() -> None:

@@ -473,9 +473,15 @@ class HybridSimulator:
 class _DenseSegment:
     def __init__(self, sim: HybridSimulator, mode: Mode, interpolant):
         self.sim, self.mode, self.interpolant = sim, mode, interpolant
-        # the arm free: the integrated state starts with (theta1, theta3), and the interpolant
-        # takes many times at once
-        self.integrates_angles = not mode.latched
 
     def __call__(self, t: float) -> tuple:
         return self.sim._unpack(self.mode, t, tuple(self.interpolant(t)))
+
+    def angles(self, times_ms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(theta1, theta3) at many times: with the arm free the integrated state starts with
+        them, and one call of the interpolant serves every time; latched, state by state."""
+        if not self.mode.latched:
+            th1, th3 = self.interpolant(times_ms)[:2]
+            return th1, th3
+        states = [self(t) for t in times_ms]
+        return np.array([s[0] for s in states]), np.array([s[1] for s in states])

@@ -159,12 +159,7 @@ class World:
         for i in np.unique(index[moving]):
             seg = segments[i]
             at = np.flatnonzero(moving & (index == i))
-            t = np.clip(times_ms[at], seg.t[0], seg.t[-1])
-            if seg.dense.integrates_angles:           # free arm: one call for all the times
-                th1[at], th3[at] = seg.dense.interpolant(t)[:2]
-                continue
-            for k, tk in zip(at, t):
-                th1[k], th3[k] = seg.dense(tk)[:2]
+            th1[at], th3[at] = seg.dense.angles(np.clip(times_ms[at], seg.t[0], seg.t[-1]))
         return th1, th3
 
     # --- internals -------------------------------------------------------------------------

@@ -2,28 +2,23 @@
 parameters, their forms of the arm's air load and of the added mass in air, and a tendon that
 yields at 17 N, over the strike. What is left is recorded as strict xfails (the issue's goals)
 beside the bounds reached today."""
-from conftest import data_file
+from conftest import published_s12_run
 import numpy as np
 import pytest
-import scipy.io as sio
 
 from mantis_sim.results import simulate
 from mantis_sim.scene import load_scene
 
-L1_MM, L3_MM = 19.0, 18.66
 T_SWITCH_LAG_MS = 0.19          # their T_switch is logged this long after the arm leaves contact
 
 
 @pytest.fixture(scope='module')
 def published():
-    m = sio.loadmat(data_file('published_sims/figS12_air_23mm.mat'), squeeze_me=True,
-                    struct_as_record=False)
-    t, th3, d1, d3 = m['t'], m['th3'], m['dth1'], m['dth3']
-    tip = np.sqrt(L1_MM ** 2 * d1 ** 2 + L3_MM ** 2 * (d1 - d3) ** 2
-                  - 2 * L1_MM * L3_MM * d1 * (d1 - d3) * np.cos(th3))
-    return dict(t=t, F=m['F'], tip=tip, arm=np.abs(d3).max() * 1e3,
-                unlatch=float(m['T_switch']) - T_SWITCH_LAG_MS,
-                iv=float(t[np.argmin(m['th1'])]), peak=float(t[np.argmax(tip)]))
+    run = published_s12_run()
+    t, tip = run['t_ms'], run['tip_mps']
+    return dict(t=t, F=run['force_N'], tip=tip, arm=np.abs(run['omega3']).max() * 1e3,
+                unlatch=run['t_switch_ms'] - T_SWITCH_LAG_MS,
+                iv=float(t[np.argmin(run['theta1'])]), peak=float(t[np.argmax(tip)]))
 
 
 @pytest.fixture(scope='module')
