@@ -145,9 +145,12 @@ def read_marker_csv(path: str | Path, frame_rate_hz: float | None = None,
         raise TrackFormatError(f'{path.name}: row {ragged + 2} has {len(body[ragged])} columns, '
                                f'the header {len(header)}')
     try:
-        data = np.array([[float(v) if v.strip() else np.nan for v in r] for r in body])
-    except ValueError as exc:
-        raise TrackFormatError(f'{path.name}: non-numeric data ({exc})') from exc
+        data = np.array(body, dtype=np.float64)     # numpy parses the strings itself: fast
+    except ValueError:                              # blank cells (lost markers) or damage
+        try:
+            data = np.array([[float(v) if v.strip() else np.nan for v in r] for r in body])
+        except ValueError as exc:
+            raise TrackFormatError(f'{path.name}: non-numeric data ({exc})') from exc
     missing = [c for c in ('frame', 'time_s') if c not in header]
     if missing:
         raise TrackFormatError(f'{path.name}: missing column(s) {missing}')
