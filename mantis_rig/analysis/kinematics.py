@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
+from scipy import stats
 
 from . import phases as ph
 from .geometry import (
@@ -243,14 +244,7 @@ def pivot_moved(points: np.ndarray, own: _Pivot, other: np.ndarray,
     if dof <= 0 or rss_own <= 0.0:
         return False
     f_stat = 0.5 * (rss_other - rss_own) / (rss_own / dof)
-    return bool(f_stat > f2_critical_value(p_value, dof))
-
-
-def f2_critical_value(p_value: float, dof: int) -> float:
-    """x with P(F > x) = p_value for Snedecor's F(2, dof): its survival function is
-    (1 + 2x/dof)^(-dof/2), so x = (dof/2)·(p^(-2/dof) − 1). In closed form, because importing
-    scipy.stats for it costs a second or two of every analysis's start-up."""
-    return 0.5 * dof * math.expm1(-2.0 / dof * math.log(p_value))
+    return bool(f_stat > stats.f.isf(p_value, 2, dof))
 
 
 def _rotation(points: np.ndarray, pivot: _Pivot, reference: np.ndarray) -> np.ndarray:
