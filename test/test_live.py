@@ -43,8 +43,10 @@ def open_client(url: str, timeout_s: float = 60.0):
         try:
             # No keepalive pings: on a loaded machine a reply queued behind unread frames would
             # close the connection (ping timeout), which is not what these tests are about.
+            # A direct connection (legacy=True), not a context manager: the stalled client is
+            # closed from a thread of its own at the end.
             return connect(url, subprotocols=[SUBPROTOCOL], open_timeout=5, max_size=None,
-                           ping_interval=None)
+                           ping_interval=None, legacy=True)
         except OSError:
             if time.monotonic() > deadline:
                 raise

@@ -66,7 +66,13 @@ def _frame_numbers(time_s: np.ndarray) -> np.ndarray:
     steps = np.diff(time_s)
     if steps.size == 0 or not np.median(steps) > 0:
         return np.arange(len(time_s), dtype=np.int64)
-    counts = np.maximum(1, np.round(steps / np.median(steps))).astype(np.int64)
+    with np.errstate(over='ignore', invalid='ignore'):
+        periods = np.round(steps / np.median(steps))
+    if not np.all(np.isfinite(periods)) or np.max(periods) > 2.0 ** 40:
+        # damaged times (non-finite, or a jump no recording spans): the tracks' own check
+        # names them; a frame count would only overflow here
+        return np.arange(len(time_s), dtype=np.int64)
+    counts = np.maximum(1, periods).astype(np.int64)
     return np.concatenate([[0], np.cumsum(counts)])
 
 

@@ -56,7 +56,9 @@ def centred_linear_rate(time_s: np.ndarray, x: np.ndarray, half_width: np.ndarra
     num = weighted_sums(np.asarray(x, float) - x[0])
     den = weighted_sums(np.asarray(time_s, float) - time_s[0])
     rate = np.zeros(n)
-    np.divide(num, den, out=rate, where=h > 0)
+    # den > 0 wherever h > 0 for increasing times, unless the times are so large that their
+    # differences vanish in rounding (a damaged file): no rate there rather than inf
+    np.divide(num, den, out=rate, where=(h > 0) & (den > 0))
     return rate
 
 
