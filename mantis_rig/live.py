@@ -60,6 +60,7 @@ class LiveRelay:
         self.host, self.port = host, self.server.port
         self.node = LeanNode('mantis_live', context=ros_context, start_parameter_services=False)
         self.channels = {}
+        self.relayed = {spec.topic: 0 for spec in topics}      # messages passed on, per topic
         for spec in topics:
             schema = foxglove.Schema(name=spec.type_name, encoding=SCHEMA_ENCODING,
                                      data=full_message_definition(spec.type_name).encode())
@@ -67,8 +68,8 @@ class LiveRelay:
                                        context=self._foxglove)
             self.channels[spec.topic] = channel
             self.node.create_subscription(message_class(spec.type_name), spec.topic,
-                                          self._relay(channel), subscription_qos(spec),
-                                          raw=True)
+                                          self._relay(spec.topic, channel),
+                                          subscription_qos(spec), raw=True)
         executor = light_executor(ros_context)
         executor.add_node(self.node)
         self._spinner = Spinner(executor, 'live-relay')
@@ -81,17 +82,21 @@ class LiveRelay:
     def url(self) -> str:
         return f'ws://{self.host}:{self.port}'
 
-    def _relay(self, channel):
+    def _relay(self, topic: str, channel):
         clock = self.node.get_clock()
 
         def relay(data: bytes) -> None:
             channel.log(bytes(data), log_time=clock.now().nanoseconds)
+            self.relayed[topic] += 1
         return relay
 
     def close(self) -> None:
+        """Stop serving, and say how many messages of each topic were passed on."""
         self._spinner.stop()
         self.node.destroy_node()
         self.server.stop()
+        counts = ', '.join(f'{topic} {n}' for topic, n in self.relayed.items() if n)
+        print(f'live view closed: relayed {counts or "no messages"}', flush=True)
 
 
 __all__ = ['LiveError', 'LiveRelay', 'parse_address']

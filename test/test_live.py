@@ -7,6 +7,7 @@ force stream stays gap-free. A port in use or a bad host is refused before the t
 import json
 import os
 from pathlib import Path
+import re
 import socket
 import struct
 import subprocess
@@ -137,7 +138,11 @@ def test_a_client_sees_the_trial_live_and_a_stalled_one_does_not_slow_it(tmp_pat
                 list(msg.position), list(msg.velocity))
     # the bag closes with the trial; the stream (and the live view) go on a moment longer
     during = {k: v for k, v in live_force.items() if k[0] <= max(bag_force)[0]}
-    assert len(during) > 50, f'{len(received)} frames, {len(live_force)} force blocks, {ended}'
+    seen = {s['topic']: sum(1 for c, _ in received if c is s) for s in subscriptions.values()}
+    assert len(during) > 50, (f'{len(received)} frames {seen}, {len(live_force)} force blocks, '
+                              f'{ended}; the trial said: {stdout[-1500:]}{stderr[-1500:]}')
+    relayed = re.search(r'live view closed: relayed .*/loadcell/force_block (\d+)', stdout)
+    assert relayed and int(relayed.group(1)) >= len(during), stdout
     assert {k: bag_force.get(k) for k in during} == during
     during = {k: v for k, v in live_stage.items() if k <= max(bag_stage)}
     assert len(during) > 50 and {k: bag_stage.get(k) for k in during} == during
