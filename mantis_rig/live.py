@@ -50,6 +50,17 @@ class LiveRelay:
 
         host, port = parse_address(address)
         self._foxglove = foxglove.Context()
+        # Every channel exists before the server does, so a client that connects at once is
+        # told of all of them together. A channel added while a client was connected was
+        # advertised to it before the server had it on record for that client: a subscription
+        # that came straight back was refused ("attempted to subscribe to unknown channel"),
+        # and that client never got the topic (foxglove-sdk 0.30).
+        self.channels = {}
+        for spec in topics:
+            schema = foxglove.Schema(name=spec.type_name, encoding=SCHEMA_ENCODING,
+                                     data=full_message_definition(spec.type_name).encode())
+            self.channels[spec.topic] = foxglove.Channel(
+                spec.topic, schema=schema, message_encoding='cdr', context=self._foxglove)
         try:
             self.server = foxglove.start_server(
                 name=name, host=host, port=port, context=self._foxglove,
@@ -59,14 +70,9 @@ class LiveRelay:
                             f'{str(exc).removeprefix("FoxgloveError: ")}') from None
         self.host, self.port = host, self.server.port
         self.node = LeanNode('mantis_live', context=ros_context, start_parameter_services=False)
-        self.channels = {}
         self.relayed = {spec.topic: 0 for spec in topics}      # messages passed on, per topic
         for spec in topics:
-            schema = foxglove.Schema(name=spec.type_name, encoding=SCHEMA_ENCODING,
-                                     data=full_message_definition(spec.type_name).encode())
-            channel = foxglove.Channel(spec.topic, schema=schema, message_encoding='cdr',
-                                       context=self._foxglove)
-            self.channels[spec.topic] = channel
+            channel = self.channels[spec.topic]
             self.node.create_subscription(message_class(spec.type_name), spec.topic,
                                           self._relay(spec.topic, channel),
                                           subscription_qos(spec), raw=True)

@@ -190,3 +190,54 @@ def test_a_bad_live_address_is_refused_before_the_trial(tmp_path, address, why):
     assert why in result.stderr and result.stderr.count('\n') == 1, result.stderr
     assert 'Traceback' not in result.stderr
     assert not (tmp_path / 'out').exists() or not any((tmp_path / 'out').iterdir())
+
+
+def test_a_client_that_connects_as_the_relay_starts_gets_every_channel():
+    """A viewer connected while the relay starts: it may subscribe to every channel it is told
+    of at once. (With the channels added after the server started, one start in a few advertised
+    a channel to such a client before the server had it on record for it, refused the
+    subscription as 'unknown channel', and the client never got that topic.)"""
+    import rclpy
+
+    from mantis_rig.live import LiveRelay
+    from mantis_rig.nodes.recorder import TRIAL_TOPICS
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        for _ in range(12):
+            port = free_port()
+            ready = threading.Event()
+            client = {}
+
+            def connect_at_once(port=port, ready=ready, client=client):
+                ws = open_client(f'ws://127.0.0.1:{port}', timeout_s=30)
+                ready.set()
+                channels = {}
+                while len(channels) < len(TRIAL_TOPICS):
+                    message = json.loads(ws.recv(timeout=30))
+                    if message['op'] == 'advertise':
+                        channels.update({c['topic']: c for c in message['channels']})
+                subscribe(ws, channels, list(channels))
+                client['ws'] = ws
+
+            thread = threading.Thread(target=connect_at_once, daemon=True)
+            thread.start()
+            relay = LiveRelay(f'127.0.0.1:{port}', ros_context=context)
+            try:
+                thread.join(30)
+                ws = client['ws']
+                refusals = []
+                try:
+                    while True:          # the server's answers to the subscription, if any
+                        message = ws.recv(timeout=0.3)
+                        if isinstance(message, str) and json.loads(message)['op'] == 'status':
+                            refusals.append(json.loads(message)['message'])
+                except TimeoutError:
+                    pass
+                assert refusals == []
+                ws.close()
+            finally:
+                relay.close()
+    finally:
+        rclpy.shutdown(context=context)
