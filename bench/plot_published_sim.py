@@ -28,6 +28,7 @@ def published_curves() -> dict:
     run = published_s12_run()
     return {'t_ms': run['t_ms'], 'theta1': run['theta1'], 'theta3': run['theta3'],
             'tip': run['tip_mps'], 'force': run['force_N'],
+            'saturated_from_ms': run['saturated_from_ms'],
             'peak_arm_radps': float(np.abs(run['omega3']).max() * 1e3)}
 
 
@@ -59,8 +60,7 @@ def main() -> None:
           f"{run.metrics['peak_arm_speed_radps']:.0f} rad/s "
           f"({100 * (run.metrics['peak_arm_speed_radps'] / arm_pub - 1):+.2f} %)")
     t_pub = pub['t_ms']
-    before = (t_pub >= run.trajectory.t_ms[0]) & (t_pub < t_pub[np.argmax(pub['force'] >= 17.0
-                                                                            - 1e-9)])
+    before = (t_pub >= run.trajectory.t_ms[0]) & (t_pub < pub['saturated_from_ms'])
     gap = np.abs(run.tendon_force_at(t_pub[before]) - pub['force'][before])
     print(f'tendon force before it saturates: up to {gap.max():.3f} N apart '
           f'(at {t_pub[before][np.argmax(gap)]:.3f} ms)')

@@ -51,12 +51,14 @@ class SimulationResult:
         """The stable subset of the metrics that `mantis sim --json` prints (JSON_KEYS)."""
         return {key: self.metrics[key] for key in JSON_KEYS}
 
+    def _segment_at(self, t_ms: float):
+        """The first segment whose span holds t_ms (None: outside the run)."""
+        return next((seg for seg in self.raw.segments if seg.t[0] <= t_ms <= seg.t[-1]), None)
+
     def state_at(self, t_ms: float) -> Optional[tuple]:
         """Interpolated (th1, th3, w1, w3) at t_ms, when simulated with dense output."""
-        for seg in self.raw.segments:
-            if seg.t[0] <= t_ms <= seg.t[-1] and seg.dense is not None:
-                return seg.dense(t_ms)[:4]
-        return None
+        seg = self._segment_at(t_ms)
+        return seg.dense(t_ms)[:4] if seg is not None and seg.dense is not None else None
 
     def tendon_force_at(self, times_ms) -> np.ndarray:
         """Tendon tension (N) at any times (ms) of a run simulated with ``dense=True``, from the
@@ -67,12 +69,10 @@ class SimulationResult:
         if self.simulator is None or any(seg.dense is None for seg in segments):
             raise ValueError('tendon_force_at needs a run simulated with dense=True')
         times = np.atleast_1d(np.asarray(times_ms, dtype=float))
-        starts = np.array([seg.t[0] for seg in segments])
         out = np.full(times.size, np.nan)
         for k, t in enumerate(times):
-            i = int(np.searchsorted(starts, t, side='right')) - 1
-            if i >= 0 and t <= segments[i].t[-1]:
-                seg = segments[i]
+            seg = self._segment_at(t)
+            if seg is not None:
                 out[k] = self.simulator.dynamics_at(seg, t, seg.dense(t)).tension_N
         return out
 

@@ -41,12 +41,11 @@ make_main_venv() {
     echo "bootstrap: creating .venv with $python_bin" >&2
     "$python_bin" -m venv .venv
   fi
-  if [ "${MANTIS_INSTALLER:-uv}" != pip ] && [ ! -x "$UV" ]; then
+  if [ "${MANTIS_INSTALLER:-uv}" = pip ]; then
+    UV=''                                  # pip_install then always takes pip
+  elif [ ! -x "$UV" ]; then
     .venv/bin/python -m pip install --quiet --disable-pip-version-check "$UV_REQUIREMENT" \
       || echo "bootstrap: could not install $UV_REQUIREMENT; installing with pip" >&2
-  fi
-  if [ "${MANTIS_INSTALLER:-uv}" = pip ]; then
-    UV=/nonexistent
   fi
 }
 

@@ -53,7 +53,9 @@ def own_ros_domain():
 def published_s12_run() -> dict:
     """The authors' published air run (their Fig. S12 .mat under test/data/published_sims):
     time (ms), theta1 and theta3 (rad), their rates (rad/ms), tendon force (N), their logged
-    T_switch (ms), and its tip speed (m/s) by the model's formula with the run's own L1 and L3."""
+    T_switch (ms), the first sample time at their 17 N saturation (ms), and its tip speed (m/s)
+    by the model's formula with the run's own L1 and L3."""
+    import numpy as np
     import scipy.io as sio
 
     from mantis_rig.analysis.kinematics import tip_speed_mps
@@ -61,8 +63,10 @@ def published_s12_run() -> dict:
                     struct_as_record=False)
     params = m['params']
     tip = tip_speed_mps(params.L_1, params.L_3, m['th3'], m['dth1'] * 1e3, m['dth3'] * 1e3)
+    saturated_from_ms = float(m['t'][np.argmax(m['F'] >= 17.0 - 1e-9)])
     return dict(t_ms=m['t'], theta1=m['th1'], theta3=m['th3'], omega1=m['dth1'],
-                omega3=m['dth3'], force_N=m['F'], t_switch_ms=float(m['T_switch']), tip_mps=tip)
+                omega3=m['dth3'], force_N=m['F'], t_switch_ms=float(m['T_switch']), tip_mps=tip,
+                saturated_from_ms=saturated_from_ms)
 
 
 def authors_values() -> dict:
