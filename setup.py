@@ -7,8 +7,8 @@ PACKAGE = 'mantis_rig'
 
 
 def config_data_files():
-    """Install config/ (scenes, the Foxglove layout) under share/mantis_rig/config, keeping its
-    sub-folders."""
+    """Install config/ (the Foxglove layout) under share/mantis_rig/config, keeping its
+    sub-folders. The scenes are mantis_sim's package data (mantis_sim/scenes/)."""
     entries = []
     for folder, _, files in os.walk('config'):
         data = [os.path.join(folder, f) for f in files if f.endswith(('.yaml', '.yml', '.json'))]
@@ -37,11 +37,19 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),
+        ('share/' + PACKAGE + '/launch', ['launch/mantis_rig.launch.py']),
         *config_data_files(),
     ],
+    package_data={'mantis_sim': ['scenes/*.yaml']},
     install_requires=['setuptools'],
-    extras_require={'nidaq': ['nidaqmx==1.7.0']},
-    zip_safe=True,
+    extras_require={
+        'nidaq': ['nidaqmx==1.7.0'],
+        # the design studies (mantis_sim.studies: mantis sweep, sweep-plot); pins as in
+        # requirements.txt, which installs them for the project's own .venv
+        'studies': ['dask==2026.8.0', 'distributed==2026.8.0', 'pyarrow==26.0.1',
+                    'threadpoolctl==3.8.0'],
+    },
+    zip_safe=False,     # the scenes are read as files from the installed package
     maintainer='mantis_rig maintainers',
     maintainer_email='mantis-rig@example.org',
     description='Mantis-shrimp robot rig: device nodes, logging, replay, analysis and simulation',

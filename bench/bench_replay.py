@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from mantis_rig.ros_env import claim_local_domain  # noqa: E402
+from mantis_rig.nodes.ros_env import claim_local_domain  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[1] / 'test' / 'data' / \
     'air_23mm_2p3mmps_trial1_markers.csv.gz'

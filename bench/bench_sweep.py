@@ -19,9 +19,9 @@ import tempfile
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from mantis_rig.sweep import run_sweep  # noqa: E402
-from mantis_rig.sweep_accuracy import choose_setting  # noqa: E402
 from mantis_sim.designs import latin_hypercube, parse_range  # noqa: E402
+from mantis_sim.studies.accuracy import choose_setting  # noqa: E402
+from mantis_sim.studies.sweep import run_sweep  # noqa: E402
 
 RANGES = ('geometry.d_t_mm=19:25', 'geometry.contact_angle_deg=1:8',
           'drive.pull_speed_mm_per_s=0.5:2.4')

@@ -173,9 +173,9 @@ def lifecycle(node_name: str, transitions, timeout_s=30.0) -> None:
 
 
 def check_bag(path, rate):
-    from mantis_rig.nodes.force_monitor import ForceMonitor
     from mantis_rig.recording import BagReader
     from mantis_rig.recording.force_block import force_block_from_msg
+    from mantis_rig.trial.force_monitor import ForceMonitor
 
     monitor = ForceMonitor(ceiling_n=float('inf'))
     blocks = [force_block_from_msg(m.message)
@@ -202,7 +202,7 @@ def main(argv=None) -> int:
                         help=argparse.SUPPRESS)
     parser.add_argument('--bag', help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    from mantis_rig.ros_env import claim_local_domain
+    from mantis_rig.nodes.ros_env import claim_local_domain
     claim_local_domain()
     if args.role == 'recorder':
         return role_recorder(args)

@@ -23,7 +23,7 @@ import time
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from mantis_rig.trial_summary import summarize  # noqa: E402
+from mantis_rig.recording.trial_summary import summarize  # noqa: E402
 
 
 def children_cpu_s() -> float:

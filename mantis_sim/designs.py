@@ -7,7 +7,7 @@ row holds every input, the metrics of `mantis sim --json` (nested ones flattened
 as `mantis sim` reports it) and the whole design's (``design_time_s``: the scene, the
 simulation and its metrics), and a status:
 ``ok``, ``no strike`` (the pull never released the arm) or ``failed`` (the simulation raised),
-with the reason. Nothing here knows where the designs run (mantis_rig.sweep does).
+with the reason. Nothing here knows where the designs run (mantis_sim.studies.sweep does).
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The root of every bad-input error, for mantis_sim and mantis_rig alike.
+"""The root of every bad-input error, for mantis_sim and every package built on it.
 
 InputError: a file, a field or a value that cannot be used, or a result it would give that is
 physically impossible. Its message names which, and where (the file; the record, topic and log

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
+from importlib import resources
 import os
 from pathlib import Path
 from typing import Optional
@@ -216,14 +217,10 @@ def load_scene_file(path: Path) -> Scene:
 
 
 def scene_dirs() -> list[Path]:
-    """Where scenes are looked up: $MANTIS_SCENE_PATH, the installed share dir, the source tree."""
+    """Where scenes are looked up: $MANTIS_SCENE_PATH, then the scenes shipped with mantis_sim
+    (package data, `mantis_sim/scenes/`)."""
     dirs = [Path(p) for p in os.environ.get('MANTIS_SCENE_PATH', '').split(os.pathsep) if p]
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        dirs.append(Path(get_package_share_directory('mantis_rig')) / 'config' / 'scenes')
-    except Exception:  # noqa: BLE001 - not installed through ament: fall back to the tree
-        pass
-    dirs.append(Path(__file__).resolve().parent.parent / 'config' / 'scenes')
+    dirs.append(Path(str(resources.files(__package__) / 'scenes')))
     return [d for d in dirs if d.is_dir()]
 
 

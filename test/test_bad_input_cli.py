@@ -110,7 +110,7 @@ def test_a_null_in_metadata_yaml(capsys, tmp_path, strike_bag):
 
 
 def test_a_scene_with_a_huge_integer_non_utf8_bytes_or_cut_short(capsys, tmp_path):
-    scene = yaml.safe_load(Path(data_file('../../config/scenes/air_23mm.yaml')).read_text())
+    scene = yaml.safe_load(Path(data_file('../../mantis_sim/scenes/air_23mm.yaml')).read_text())
     huge = tmp_path / 'huge.yaml'
     huge.write_text(yaml.safe_dump({**scene, 'geometry': {'d_t_mm': 10 ** 400}}))
     refused(capsys, ['sim', '--scene', huge], huge, 'd_t_mm')

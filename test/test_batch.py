@@ -15,9 +15,9 @@ from conftest import data_file
 import numpy as np
 import pytest
 
-from mantis_rig import cli_replay
 from mantis_rig.analysis import batch, tracker_export
 from mantis_rig.cli import main
+from mantis_rig.cli import options as cli_options
 
 PAIR_CSV = data_file('real_trials/air_23mm_19kfps_pair_track.csv')
 REFERENCE = data_file('air_23mm_2p3mmps_trial1_markers.csv.gz')
@@ -272,7 +272,7 @@ def test_length_unit_option(tmp_path, capsys, pair_report):
     assert code == 1 and read_table(out)[0]['status'] == 'refused'
     with pytest.raises(SystemExit):
         main(['analyze', str(path), '--length-unit', 'inch'])
-    assert cli_replay.LENGTH_UNITS == tracker_export.LENGTH_UNITS
+    assert cli_options.LENGTH_UNITS == tracker_export.LENGTH_UNITS
 
 
 def test_export_options_are_refused_with_a_bag(tmp_path, capsys):

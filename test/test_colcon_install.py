@@ -2,8 +2,9 @@
 .venv-colcon, colcon and the runtime dependencies from PyPI, made by `scripts/bootstrap.sh
 --test`), then, from the install space alone, the simulated stack started by its installed
 executables with the README's parameters, one trial through the supervisor's service, the bag
-written, the scenes found in share/mantis_rig; the ament index entry; and package.xml (format
-3, an exec_depend for every ROS package and Python library the code imports)."""
+written, the scenes found as mantis_sim's installed package data, the launch file in share;
+the ament index entry; and package.xml (format 3, an exec_depend for every ROS package and
+Python library the code and the launch file import)."""
 import ast
 import os
 from pathlib import Path
@@ -88,21 +89,26 @@ def test_the_install_space_has_the_executables_the_index_and_the_share_files(ins
             PACKAGE).exists()
     share = prefix / PACKAGE / 'share' / PACKAGE
     assert (share / 'package.xml').read_bytes() == (REPO / 'package.xml').read_bytes()
-    assert sorted(p.name for p in (share / 'config' / 'scenes').glob('*.yaml')) == \
-        sorted(p.name for p in (REPO / 'config' / 'scenes').glob('*.yaml'))
+    assert sorted(p.name for p in (share / 'config' / 'foxglove').iterdir()) == \
+        sorted(p.name for p in (REPO / 'config' / 'foxglove').iterdir())
+    assert (share / 'launch' / 'mantis_rig.launch.py').read_bytes() == \
+        (REPO / 'launch' / 'mantis_rig.launch.py').read_bytes()
+    scenes = (prefix / PACKAGE / 'lib').glob('python*/site-packages/mantis_sim/scenes/*.yaml')
+    assert sorted(p.name for p in scenes) == \
+        sorted(p.name for p in (REPO / 'mantis_sim' / 'scenes').glob('*.yaml'))
 
 
-def test_the_installed_package_finds_its_scenes_in_share(install):
+def test_the_installed_package_finds_its_scenes_in_its_package_data(install):
     prefix, env = install
     probe = ('import mantis_rig, mantis_sim.scene as s; print(mantis_rig.__file__); '
-             'print(s.available_scenes()["air_23mm_rig"])')
+             'print(s.__file__); print(s.available_scenes()["air_23mm_rig"])')
     result = subprocess.run([str(COLCON_VENV / 'bin' / 'python'), '-c', probe], env=env,
                             cwd=prefix, capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
-    module, scene = result.stdout.split()
+    module, scene_module, scene = result.stdout.split()
     assert module.startswith(str(prefix / PACKAGE / 'lib')), module
-    assert scene == str(prefix / PACKAGE / 'share' / PACKAGE / 'config' / 'scenes' /
-                        'air_23mm_rig.yaml')
+    assert scene_module.startswith(str(prefix / PACKAGE / 'lib')), scene_module
+    assert scene == str(Path(scene_module).parent / 'scenes' / 'air_23mm_rig.yaml')
 
 
 def test_a_trial_from_the_installed_executables(install, tmp_path):
@@ -163,7 +169,7 @@ PYPI_ONLY = {'mcap', 'mcap_ros2', 'rosbags', 'thorlabs_apt_protocol', 'nidaqmx',
 
 def imported_top_levels() -> set:
     names = set()
-    for folder in ('mantis_rig', 'mantis_sim'):
+    for folder in ('mantis_rig', 'mantis_sim', 'launch'):
         for path in (REPO / folder).rglob('*.py'):
             for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
                 if isinstance(node, ast.Import):

@@ -184,7 +184,7 @@ def test_a_bags_metadata_yaml_with_any_field_changed_is_read_or_refused(source_b
 
 
 # --------------------------------------------------------------------------- scenes
-SCENE = yaml.safe_load((REPO / 'config' / 'scenes' / 'air_23mm_rig.yaml').read_text())
+SCENE = yaml.safe_load((REPO / 'mantis_sim' / 'scenes' / 'air_23mm_rig.yaml').read_text())
 SCENE_FIELDS = [(section, key) for section, values in SCENE.items() if isinstance(values, dict)
                 for key in values] + [(key, None) for key in SCENE]
 SCENE_VALUES = st.one_of(st.none(), st.booleans(), st.integers(),

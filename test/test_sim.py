@@ -665,7 +665,7 @@ def test_unknown_and_malformed_scenes(tmp_path):
 
 
 def test_damaged_scene_files_are_refused_with_the_reason(tmp_path):
-    text = (REPO / 'config' / 'scenes' / 'air_23mm.yaml').read_text()
+    text = (REPO / 'mantis_sim' / 'scenes' / 'air_23mm.yaml').read_text()
     huge = tmp_path / 'huge.yaml'
     huge.write_text(text.replace('d_t_mm: 23.0', 'd_t_mm: ' + '9' * 400))
     with pytest.raises(ParameterError, match=r'geometry.d_t_mm = 9+\.\.\. \(400 characters\) '

@@ -6,9 +6,9 @@ import time
 import numpy as np
 import pytest
 
-from mantis_rig.nodes.force_monitor import ForceMonitor
-from mantis_rig.nodes.trial_conditions import ConditionError, TrialConditions, check_value
-from mantis_rig.nodes.trial_sequence import DEVICE_NODES, Pending, TrialSequence
+from mantis_rig.trial.conditions import ConditionError, TrialConditions, check_value
+from mantis_rig.trial.force_monitor import ForceMonitor
+from mantis_rig.trial.sequence import DEVICE_NODES, Pending, TrialSequence
 
 RATE = 20_000.0
 
@@ -299,7 +299,7 @@ class LossyRig(FakeRig):
 
 
 def test_lost_lifecycle_replies_are_recovered_by_asking_again(monkeypatch):
-    from mantis_rig.nodes import trial_sequence
+    from mantis_rig.trial import sequence as trial_sequence
     monkeypatch.setattr(trial_sequence, 'QUERY_RETRY_S', 0.2)
     rig, seq, outcome = run_trial(LossyRig())
     assert outcome['result'] == 'completed', outcome
@@ -430,7 +430,7 @@ def test_supervisor_refuses_bad_input_with_the_reason(ros, tmp_path, monkeypatch
 def test_a_trial_needs_room_on_disk_for_its_bag(tmp_path):
     from collections import namedtuple
 
-    from mantis_rig.nodes.log_space import estimate_bag_bytes, free_space_problem
+    from mantis_rig.trial.log_space import estimate_bag_bytes, free_space_problem
     usage = namedtuple('usage', 'total used free')
     conditions = TrialConditions()
     # a full simulated air_23mm trial's bag is 1.5 MB compressed; the estimate is uncompressed
@@ -450,7 +450,7 @@ def test_a_trial_needs_room_on_disk_for_its_bag(tmp_path):
 def test_successive_ros_domain_claims_move_on():
     """A test never gets the domain the previous one just left (its processes' participants
     may still linger there in discovery)."""
-    from mantis_rig.ros_env import claim_free_domain, release_domain
+    from mantis_rig.nodes.ros_env import claim_free_domain, release_domain
     first = claim_free_domain()
     release_domain(first)
     second = claim_free_domain()
@@ -464,9 +464,9 @@ def test_a_domain_another_process_just_left_is_not_claimed_next():
     import subprocess
     import sys
 
-    from mantis_rig.ros_env import claim_free_domain, release_domain
+    from mantis_rig.nodes.ros_env import claim_free_domain, release_domain
     left = subprocess.run(
-        [sys.executable, '-c', 'from mantis_rig.ros_env import claim_free_domain, '
+        [sys.executable, '-c', 'from mantis_rig.nodes.ros_env import claim_free_domain, '
          'release_domain; d = claim_free_domain(); release_domain(d); print(d)'],
         capture_output=True, text=True, check=True)
     mine = claim_free_domain()

@@ -35,7 +35,7 @@ from mantis_rig.nodes.recorder import TRIAL_TOPICS
 from mantis_rig.nodes.trial_client import TrialClient
 from mantis_rig.recording import BagReader, TruncatedBagWarning, recover_bag
 from mantis_rig.recording.marker_block import concatenate, marker_block_from_msg
-from mantis_rig.trial_summary import summarize
+from mantis_rig.recording.trial_summary import summarize
 
 REPO = Path(__file__).resolve().parents[1]
 SCENE = 'air_23mm'

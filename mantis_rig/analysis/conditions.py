@@ -26,8 +26,8 @@ def _number(conditions: dict, key: str) -> float | None:
 
 def _check_ranges(values: dict, source: str) -> None:
     """The conditions the analysis uses, against the ranges the command line and the
-    supervisor enforce (one source: nodes.trial_conditions); ConditionError names the value."""
-    from mantis_rig.nodes.trial_conditions import ConditionError, check_value
+    supervisor enforce (one source: trial.conditions); ConditionError names the value."""
+    from mantis_rig.trial.conditions import ConditionError, check_value
     for key in ('d_t_mm', 'contact_angle_deg'):
         raw = values.get(key)
         if raw is None or raw == '':

@@ -7,18 +7,20 @@ import sys
 from mantis_sim.errors import InputError
 from mantis_sim.model import SimulationError
 
-from . import cli_replay, cli_sim, cli_sweep, cli_trial
-
-USAGE_ERROR = 2
+from . import analyze, import_tracking, recover, replay, sim, sweep, trial
+from .options import USAGE_ERROR
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog='mantis', description=__doc__)
     commands = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
-    cli_sim.add_commands(commands)
-    cli_replay.add_commands(commands)
-    cli_trial.add_commands(commands)
-    cli_sweep.add_commands(commands)
+    sim.add_commands(commands)
+    replay.add_commands(commands)
+    import_tracking.add_commands(commands)
+    analyze.add_commands(commands)
+    recover.add_commands(commands)
+    trial.add_commands(commands)
+    sweep.add_commands(commands)
     return parser
 
 

@@ -8,8 +8,7 @@ import sys
 from mantis_sim.parameters import SECTIONS, describe
 from mantis_sim.results import simulate
 from mantis_sim.scene import EFFECTS, available_scenes, load_scene
-
-from . import sim_report
+from mantis_sim.studies import strike_report
 
 
 def add_commands(commands) -> None:
@@ -51,13 +50,13 @@ def run_sim(args) -> int:
     scene = _scene_from_args(args)
     result = simulate(scene)
     if args.out:
-        sim_report.write_trajectory_csv(result, args.out)
+        strike_report.write_trajectory_csv(result, args.out)
     if args.plot:
-        sim_report.plot_trial(result, args.plot)
+        strike_report.plot_trial(result, args.plot)
     if args.json:
         print(json.dumps(result.to_json_dict()))
     else:
-        print(sim_report.summary_text(result))
+        print(strike_report.summary_text(result))
         for label, path in (('trajectory', args.out), ('plot', args.plot)):
             if path:
                 print(f'{label}: {path}')

@@ -7,7 +7,7 @@ from pathlib import Path
 import sys
 import time
 
-from .nodes.trial_conditions import (
+from ..trial.conditions import (
     BACKENDS,
     PARAMETERS,
     ConditionError,
@@ -80,7 +80,7 @@ def _typed(key: str, text: str):
 
 def stack_config(args):
     """A StackConfig from the command line; ConditionError / SceneError say what is wrong."""
-    from .nodes.bringup import StackConfig
+    from ..nodes.bringup import StackConfig
 
     if not (args.real_time_factor >= 0 and math.isfinite(args.real_time_factor)):
         raise ConditionError(f'--real-time-factor {args.real_time_factor} must be >= 0 (0: as '
@@ -124,8 +124,8 @@ def _ros_session(run, args) -> int:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    from .nodes.stopping import StopSignals
-    from .ros_env import claim_local_domain
+    from ..nodes.ros_env import claim_local_domain
+    from ..nodes.stopping import StopSignals
     claim_local_domain()
     # our handlers, not rclpy's: its handler shuts the context down before the stage's stop and
     # the trial's end could be published
@@ -154,10 +154,10 @@ def run_bringup(args) -> int:
 
 
 def _trial(config, args, signals) -> int:
-    from .nodes.bringup import Stack, StackError
-    from .nodes.stopping import StopRequested, say
-    from .nodes.trial_client import TrialClient
-    from .trial_summary import format_summary, summarize
+    from ..nodes.bringup import Stack, StackError
+    from ..nodes.stopping import StopRequested, say
+    from ..nodes.trial_client import TrialClient
+    from ..recording.trial_summary import format_summary, summarize
 
     relay = _live_relay(args)
     stack = Stack(config, log_dir=args.log_dir)
@@ -200,7 +200,7 @@ def _live_relay(args):
     """The live view, if asked for (LiveError, before anything starts, if it cannot be)."""
     if not args.live:
         return None
-    from .live import LiveRelay
+    from ..live import LiveRelay
     relay = LiveRelay(args.live)
     print(f'live view: {relay.url} (Foxglove: Open connection, Foxglove WebSocket; layout '
           f'config/foxglove/trial_layout.json)', flush=True)
@@ -218,8 +218,8 @@ class _TrialRun:
         self.reason = ''
 
     def follow(self, client, stack, timeout_s: float, stopping=lambda: False) -> None:
-        from .nodes.bringup import StackError
-        from .nodes.supervisor_node import LOG_WRITE_FAILED
+        from ..nodes.bringup import StackError
+        from ..nodes.supervisor_node import LOG_WRITE_FAILED
 
         def log_failed() -> bool:
             return client.reason.startswith(LOG_WRITE_FAILED)
@@ -284,8 +284,8 @@ def _wait_closed(bag: Path, timeout_s: float, failed=lambda: False) -> bool:
 
 
 def _bringup(config, args, signals) -> int:
-    from .nodes.bringup import Stack
-    from .nodes.stopping import StopRequested, say
+    from ..nodes.bringup import Stack
+    from ..nodes.stopping import StopRequested, say
 
     relay = _live_relay(args)
     stack = Stack(config, log_dir=args.log_dir)

@@ -12,10 +12,10 @@ from __future__ import annotations
 
 from mantis_sim.errors import InputError
 
-from .nodes.executors import Spinner, light_executor
-from .nodes.recorder import TRIAL_TOPICS, subscription_qos
-from .recording.interfaces import message_class
-from .recording.message_definition import SCHEMA_ENCODING, full_message_definition
+from ..nodes.executors import Spinner, light_executor
+from ..nodes.recorder import TRIAL_TOPICS, subscription_qos
+from ..recording.interfaces import message_class
+from ..recording.message_definition import SCHEMA_ENCODING, full_message_definition
 
 DEFAULT_HOST = '127.0.0.1'
 BACKLOG_MESSAGES = 1024          # per client; the oldest is dropped beyond it
@@ -46,7 +46,7 @@ class LiveRelay:
     def __init__(self, address: str, ros_context=None, topics=TRIAL_TOPICS, name='mantis_rig'):
         import foxglove
 
-        from .nodes.lean_node import LeanNode
+        from ..nodes.lean_node import LeanNode
 
         host, port = parse_address(address)
         self._foxglove = foxglove.Context()

@@ -21,7 +21,6 @@ The device nodes come up unconfigured; the supervisor configures and activates t
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-import importlib
 import os
 from pathlib import Path
 import signal
@@ -33,13 +32,11 @@ import time
 from rclpy.parameter import Parameter
 import yaml
 
-from mantis_rig.safety_limits import FORCE_CEILING_NAME, FORCE_GUARD_NODES
+from mantis_rig.trial.safety_limits import FORCE_CEILING_NAME, FORCE_GUARD_NODES
 
 from .executors import STACK_PARENT_ENV, Spinner, light_executor, threaded_executor
-from .sim_rig import DEVICE_CLASSES, DEVICE_THREADS, WORLD_NODE, SimRig, device_class, release
-
-SUPERVISOR_NODE = ('supervisor_node', 'SupervisorNode')
-SIM_RIG_PROCESS = 'sim_rig'
+from .node_table import DEVICES, SIM_RIG_PROCESS, STAGE_NODE, SUPERVISOR, WORLD
+from .sim_rig import DEVICE_THREADS, SimRig, release
 
 
 @dataclass
@@ -64,21 +61,21 @@ class StackConfig:
         # that reads the parameter unset): [''] means no override to the nodes.
         overrides = list(self.scene_overrides) or ['']
         if self.sim:
-            params[WORLD_NODE] = {'scene': self.scene, 'seed': self.seed,
+            params[WORLD.name] = {'scene': self.scene, 'seed': self.seed,
                                   'set': list(overrides),
                                   'real_time_factor': float(self.real_time_factor)}
-        # one force ceiling for every guard (mantis_rig.safety_limits)
+        # one force ceiling for every guard (mantis_rig.trial.safety_limits)
         ceiling = {FORCE_CEILING_NAME: float(self.supervisor[FORCE_CEILING_NAME])} \
             if FORCE_CEILING_NAME in self.supervisor else {}
-        for name in DEVICE_CLASSES:
+        for name in (entry.name for entry in DEVICES):
             params[name] = {'backend': self.backend, 'scene': self.scene, 'seed': self.seed,
                             'set': list(overrides), **self.devices.get(name, {})}
             if name in FORCE_GUARD_NODES:
                 params[name].update(ceiling)
-        params[SUPERVISOR_NODE[0]] = {'backend': self.backend, 'scene': self.scene,
+        params[SUPERVISOR.name] = {'backend': self.backend, 'scene': self.scene,
                                       **self.supervisor}
         if self.sim:
-            params[SUPERVISOR_NODE[0]]['use_sim_time'] = True
+            params[SUPERVISOR.name]['use_sim_time'] = True
         return params
 
     def node_names(self) -> list:
@@ -86,20 +83,16 @@ class StackConfig:
 
     def process_names(self) -> list:
         """The processes of the multi-process layout: the rig's, then the supervisor's."""
-        rig = [SIM_RIG_PROCESS] if self.sim else list(DEVICE_CLASSES)
-        return rig + [SUPERVISOR_NODE[0]]
+        rig = [SIM_RIG_PROCESS] if self.sim else [entry.name for entry in DEVICES]
+        return rig + [SUPERVISOR.name]
 
     @property
     def stage_process(self) -> str:
-        return SIM_RIG_PROCESS if self.sim else 'stage_node'
+        return SIM_RIG_PROCESS if self.sim else STAGE_NODE
 
 
 class StackError(RuntimeError):
     """A node of the stack could not be started or has died."""
-
-
-def _node_class(name: str, class_name: str):
-    return getattr(importlib.import_module(f'mantis_rig.nodes.{name}'), class_name)
 
 
 def _overrides(values: dict) -> list:
@@ -136,7 +129,7 @@ class Stack:
 
     def _start_nodes(self) -> None:
         params = self.config.node_parameters()
-        supervisor_params = params[SUPERVISOR_NODE[0]]
+        supervisor_params = params[SUPERVISOR.name]
         try:
             if self.config.sim:
                 # the simulated devices read the world directly, and every node's sim time is
@@ -145,12 +138,12 @@ class Stack:
                 self.rig = SimRig(params)
                 self.rig.add_to(self.executor, self.device_executor)
             else:
-                for name in DEVICE_CLASSES:
-                    self._add(device_class(name)(
-                        node_name=name, parameter_overrides=_overrides(params[name])),
+                for entry in DEVICES:
+                    self._add(entry.node_class()(
+                        node_name=entry.name, parameter_overrides=_overrides(params[entry.name])),
                         self.device_executor)
-            supervisor = _node_class(*SUPERVISOR_NODE)(
-                node_name=SUPERVISOR_NODE[0], parameter_overrides=_overrides(supervisor_params))
+            supervisor = SUPERVISOR.node_class()(
+                node_name=SUPERVISOR.name, parameter_overrides=_overrides(supervisor_params))
             if self.rig is not None:
                 self.rig.clock.attach(supervisor)
             self._add(supervisor, self.executor)
@@ -217,9 +210,9 @@ class Stack:
         log closed), then end every node and process. In multi-process mode the supervisor
         process gets `signum` first, then the device processes."""
         for node in self.nodes:
-            if node.get_name() == SUPERVISOR_NODE[0]:
+            if node.get_name() == SUPERVISOR.name:
                 node.shutdown_trial(reason)
-        supervisor = self.processes.get(SUPERVISOR_NODE[0])
+        supervisor = self.processes.get(SUPERVISOR.name)
         if supervisor is not None:            # first: it aborts a trial and closes its log
             _end_processes([supervisor], signum)
         _end_processes(self.processes.values(), signum)
@@ -242,7 +235,7 @@ class Stack:
         if self.rig is not None:
             self.rig.emergency_stop()
         for node in self.nodes:
-            if node.get_name() == 'stage_node':
+            if node.get_name() == STAGE_NODE:
                 node.emergency_stop()
         first = self.config.stage_process
         stage = self.processes.get(first)

@@ -28,7 +28,7 @@ from rclpy.executors import (
 from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
-from mantis_rig.ros_env import claim_local_domain
+from mantis_rig.nodes.ros_env import claim_local_domain
 
 from .lean_node import LeanNode
 from .stopping import StopRequested, StopSignals, watch_parent

@@ -25,7 +25,7 @@ from mantis_rig.hardware.nidaq import parse_ai_channel
 from mantis_rig.nodes.device_node import ERROR, WARN, DeviceNode, Param, time_msg
 from mantis_rig.nodes.executors import run_node
 from mantis_rig.recording.force_block import force_block_to_msg
-from mantis_rig.safety_limits import (
+from mantis_rig.trial.safety_limits import (
     FORCE_CEILING_DEFAULT_N,
     FORCE_CEILING_DESCRIPTION,
     FORCE_CEILING_NAME,

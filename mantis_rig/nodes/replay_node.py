@@ -16,8 +16,8 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from mantis_rig.nodes.ros_env import claim_local_domain
 from mantis_rig.replay import BagPlayer, ReplayError
-from mantis_rig.ros_env import claim_local_domain
 
 from .lean_node import WithoutDefaultEventHandlers
 

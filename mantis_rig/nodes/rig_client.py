@@ -14,8 +14,9 @@ from rcl_interfaces.srv import SetParameters
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
+from mantis_rig.trial.sequence import DEVICE_NODES, Pending
+
 from .recorder import RELIABLE
-from .trial_sequence import DEVICE_NODES, Pending
 
 TRIGGER_SERVICES = ('stage/home', 'stage/stop', 'loadcell/tare', 'camera/arm', 'camera/trigger')
 TRANSITIONS = {'configure': Transition.TRANSITION_CONFIGURE,

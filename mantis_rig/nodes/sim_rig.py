@@ -15,7 +15,6 @@ unconfigured: the supervisor configures them.
 """
 from __future__ import annotations
 
-import importlib
 import sys
 
 from rclpy.parameter import Parameter
@@ -23,18 +22,11 @@ from rclpy.parameter import Parameter
 from mantis_rig.hardware.local_world import LocalWorldPort
 
 from .executors import Spinner, light_executor, run_node, spin_in_slices, threaded_executor
+from .node_table import DEVICES, STAGE_NODE, WORLD
 from .shared_clock import SharedSimClock
-from .sim_world_node import SimWorldNode
 from .stopping import StopRequested
 
-DEVICE_CLASSES = {'stage_node': 'StageNode', 'loadcell_node': 'LoadcellNode',
-                  'camera_node': 'CameraNode'}
-WORLD_NODE = 'sim_world_node'
 DEVICE_THREADS = 8       # the device nodes' blocking services and backends waiting for the world
-
-
-def device_class(name: str):
-    return getattr(importlib.import_module(f'mantis_rig.nodes.{name}'), DEVICE_CLASSES[name])
 
 
 def _overrides(values: dict) -> list:
@@ -52,16 +44,16 @@ class SimRig:
         self.clock = SharedSimClock()
         self.nodes = []
         try:
-            self.world_node = self._add(SimWorldNode(
-                node_name=WORLD_NODE, context=context,
-                parameter_overrides=_overrides(parameters.get(WORLD_NODE, {}))))
+            self.world_node = self._add(WORLD.node_class()(
+                node_name=WORLD.name, context=context,
+                parameter_overrides=_overrides(parameters.get(WORLD.name, {}))))
             self.world_node.clock_listeners.append(self.clock.on_clock)
             port = LocalWorldPort(self.world_node.runner)
-            for name in DEVICE_CLASSES:
-                values = {**parameters.get(name, {}), 'backend': 'sim'}
+            for entry in DEVICES:
+                values = {**parameters.get(entry.name, {}), 'backend': 'sim'}
                 values.pop('use_sim_time', None)       # the shared clock is the world's
-                self._add(device_class(name)(
-                    node_name=name, context=context, parameter_overrides=_overrides(values),
+                self._add(entry.node_class()(
+                    node_name=entry.name, context=context, parameter_overrides=_overrides(values),
                     world_port=port, sim_clock=self.clock))
         except BaseException:
             self.destroy_node()
@@ -88,7 +80,7 @@ class SimRig:
     def emergency_stop(self) -> None:
         """Stop the simulated stage now, from any thread (a signal handler)."""
         for node in self.nodes:
-            if node.get_name() == 'stage_node':
+            if node.get_name() == STAGE_NODE:
                 node.emergency_stop()
 
     def spin(self, check_stop=lambda: None) -> None:
@@ -137,4 +129,4 @@ if __name__ == '__main__':
     sys.exit(main())
 
 
-__all__ = ['SimRig', 'DEVICE_CLASSES', 'WORLD_NODE']
+__all__ = ['SimRig']

@@ -36,7 +36,7 @@ from mantis_rig.nodes.clock_ticker import ClockTicker
 from mantis_rig.nodes.device_node import ERROR, OK, WARN, DeviceNode, Param
 from mantis_rig.nodes.executors import SideNode, run_node
 from mantis_rig.recording.force_block import force_block_from_msg
-from mantis_rig.safety_limits import (
+from mantis_rig.trial.safety_limits import (
     FORCE_CEILING_DEFAULT_N,
     FORCE_CEILING_DESCRIPTION,
     FORCE_CEILING_NAME,

@@ -2,9 +2,9 @@
 
 Services ``/supervisor/start_trial`` and ``/supervisor/abort`` (std_srvs/Trigger); state on
 ``/supervisor/state`` (std_msgs/String, transient local) and on ``/diagnostics``. The trial
-conditions and procedure settings are parameters (mantis_rig.nodes.trial_conditions); they are
+conditions and procedure settings are parameters (mantis_rig.trial.conditions); they are
 fixed while a trial runs. Each trial is logged to its own bag directory under ``out``; the
-start_trial response names it. The sequence itself is mantis_rig.nodes.trial_sequence.
+start_trial response names it. The sequence itself is mantis_rig.trial.sequence.
 """
 from __future__ import annotations
 
@@ -27,14 +27,14 @@ from std_srvs.srv import Trigger
 from mantis_rig.recording import TRIAL_CONDITIONS, BagWriteError, BagWriter
 from mantis_rig.recording.force_block import force_block_from_msg
 from mantis_rig.recording.marker_block import marker_block_from_msg
+from mantis_rig.trial.conditions import PARAMETERS, ConditionError, TrialConditions, check_value
+from mantis_rig.trial.log_space import free_space_problem
+from mantis_rig.trial.sequence import DEVICE_NODES, TrialSequence
 
 from .executors import SideNode, light_executor, run_node
 from .lean_node import WithoutDefaultEventHandlers
-from .log_space import free_space_problem
 from .recorder import LATCHED, RELIABLE, Recorder
 from .rig_client import RigClient
-from .trial_conditions import PARAMETERS, ConditionError, TrialConditions, check_value
-from .trial_sequence import DEVICE_NODES, TrialSequence
 
 NODE_NAME = 'supervisor_node'
 STATUS_NAME = 'supervisor_node: trial'

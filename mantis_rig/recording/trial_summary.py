@@ -5,10 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import math
 
-from mantis_rig.nodes.force_monitor import ForceMonitor
 from mantis_rig.recording import TRIAL_CONDITIONS, TRIAL_OUTCOME, BagReader
 from mantis_rig.recording.force_block import force_block_from_msg
 from mantis_rig.recording.marker_block import concatenate, marker_block_from_msg
+from mantis_rig.trial.force_monitor import ForceMonitor
 
 FORCE_TOPIC = '/loadcell/force_block'
 MARKER_TOPIC = '/camera/markers'

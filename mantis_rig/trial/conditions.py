@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass, fields
 import math
 
 from mantis_rig.hardware.interfaces import StageLimits
-from mantis_rig.safety_limits import (
+from mantis_rig.trial.safety_limits import (
     FORCE_CEILING_DEFAULT_N,
     FORCE_CEILING_DESCRIPTION,
     FORCE_CEILING_RANGE_N,

@@ -18,10 +18,10 @@ import threading
 import time
 from typing import Protocol
 
-from mantis_rig.safety_limits import FORCE_CEILING_NAME, FORCE_GUARD_NODES
+from mantis_rig.trial.safety_limits import FORCE_CEILING_NAME, FORCE_GUARD_NODES
 
+from .conditions import TrialConditions
 from .force_monitor import ForceMonitor
-from .trial_conditions import TrialConditions
 
 STATES = ('idle', 'configuring', 'homing', 'taking_up_slack', 'taring', 'arming', 'pulling',
           'released', 'stopping', 'returning', 'done', 'aborted')

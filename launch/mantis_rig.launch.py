@@ -1,0 +1,95 @@
+"""The rig's node stack on a ROS 2 Jazzy install: what `mantis bringup --backend sim|hardware
+--processes multi` starts, with the same parameters.
+
+    ros2 launch mantis_rig mantis_rig.launch.py                      # the simulated rig
+    ros2 launch mantis_rig mantis_rig.launch.py backend:=hardware out:=/data/trials
+    ros2 service call /supervisor/start_trial std_srvs/srv/Trigger   # then, one trial
+
+sim: the `sim_rig` process (the simulated world and the three device nodes) and
+`supervisor_node` on the world's clock (use_sim_time), its trial conditions taken from the
+scene as `mantis bringup` takes them; hardware: `stage_node`, `loadcell_node`, `camera_node`
+and `supervisor_node`, a process each. One params file with a section per node, as
+`mantis bringup` writes it. The device nodes come up unconfigured; the supervisor configures
+and activates them. Other supervisor parameters: `ros2 param set /supervisor_node ...`.
+
+Checked only statically (test/test_launch_file.py parses this file: its executables against
+setup.py's console scripts, its parameters against the nodes' declared ones and against
+`mantis bringup`'s); `ros2 launch` is not installable from PyPI, so it has not been run here.
+The functions above `generate_launch_description` use nothing from `launch`: the check
+runs them.
+"""
+import os
+import tempfile
+
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+import yaml
+
+# launch argument -> (default, description); the defaults are `mantis bringup`'s
+ARGUMENTS = {
+    'backend': ('sim', 'device backends: sim or hardware'),
+    'scene': ('air_23mm_rig', 'simulated scene (sim backend; see `mantis scenes`)'),
+    'seed': ('0', 'sensor noise seed (sim backend)'),
+    'real_time_factor': ('1.0', 'simulated seconds per wall second (sim backend; 0: as fast '
+                                'as the stack keeps up)'),
+    'out': ('trials', 'directory under which each trial gets its bag directory'),
+}
+DEVICE_NODES = ('stage_node', 'loadcell_node', 'camera_node')
+
+
+def processes(backend):
+    """The executables, in start order: the rig's, then the supervisor's."""
+    rig = ['sim_rig'] if backend == 'sim' else list(DEVICE_NODES)
+    return rig + ['supervisor_node']
+
+
+def scene_conditions(scene):
+    """The trial conditions a simulated scene states (as `mantis bringup` takes them)."""
+    from mantis_sim.scene import load_scene
+
+    loaded = load_scene(scene)
+    return {'pull_speed_mm_s': loaded.drive.pull_speed_mm_per_s,
+            'medium': loaded.medium.name, 'd_t_mm': loaded.geometry.d_t_mm,
+            'contact_angle_deg': loaded.geometry.contact_angle_deg}
+
+
+def node_parameters(backend, scene, seed, real_time_factor, out):
+    """node name -> its parameters (the params file's sections)."""
+    overrides = ['']          # `set`: no scene override (an empty list would have no type)
+    params = {}
+    if backend == 'sim':
+        params['sim_world_node'] = {'scene': scene, 'seed': seed, 'set': list(overrides),
+                                    'real_time_factor': real_time_factor}
+    for name in DEVICE_NODES:
+        params[name] = {'backend': backend, 'scene': scene, 'seed': seed,
+                        'set': list(overrides)}
+    supervisor = {'backend': backend, 'scene': scene, 'out': out}
+    if backend == 'sim':
+        supervisor.update(scene_conditions(scene))
+        supervisor['use_sim_time'] = True
+    params['supervisor_node'] = supervisor
+    return params
+
+
+def _stack(context):
+    value = {name: LaunchConfiguration(name).perform(context) for name in ARGUMENTS}
+    backend = value['backend']
+    if backend not in ('sim', 'hardware'):
+        raise ValueError(f'backend:={backend}: sim or hardware')
+    params = node_parameters(backend, value['scene'], int(value['seed']),
+                             float(value['real_time_factor']), value['out'])
+    handle, path = tempfile.mkstemp(prefix='mantis_stack_', suffix='.yaml')
+    with os.fdopen(handle, 'w') as f:
+        yaml.safe_dump({name: {'ros__parameters': values} for name, values in params.items()},
+                       f)
+    return [Node(package='mantis_rig', executable=name, output='screen', parameters=[path])
+            for name in processes(backend)]
+
+
+def generate_launch_description():
+    return LaunchDescription(
+        [DeclareLaunchArgument(name, default_value=default, description=text)
+         for name, (default, text) in ARGUMENTS.items()]
+        + [OpaqueFunction(function=_stack)])

@@ -1,0 +1,86 @@
+"""What several commands share: the usage exit status, one-line errors, the trial-condition
+options and the options for what a tracker export leaves out."""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+USAGE_ERROR = 2
+
+
+def err(command, text):
+    print(f'mantis {command}: {text}', file=sys.stderr)
+
+
+# ------------------------------------------------------------- trial conditions, by hand
+#: Trial conditions a tracking file does not carry, given on the command line (the rig's
+#: bags carry them in ``trial_conditions``): trial condition -> option.
+CONDITION_OPTIONS = {'d_t_mm': '--d-t-mm', 'contact_angle_deg': '--contact-angle-deg'}
+
+
+def add_condition_options(parser) -> None:
+    parser.add_argument('--d-t-mm', type=float, metavar='MM',
+                        help='tendon guide distance d_t of the trial (default: the bag\'s '
+                             'trial conditions, else 23 mm)')
+    parser.add_argument('--contact-angle-deg', type=float, metavar='DEG',
+                        help='contact angle measured on the rig for this trial; sets θ3\'s '
+                             'zero (default: the bag\'s trial conditions, else unknown: θ3 '
+                             'counts from the latch)')
+
+
+# ------------------------------------------------------- what a tracker export leaves out
+def positive_float(text):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a number') from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f'{text!r}: must be a positive number')
+    return value
+
+
+def positive_int(text):
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a whole number') from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f'{text!r}: must be 1 or more')
+    return value
+
+
+#: analysis.tracker_export.LENGTH_UNITS, written out: building the parser imports no analysis.
+LENGTH_UNITS = ('mm', 'um', 'px')
+
+
+def add_export_options(parser) -> None:
+    parser.add_argument('--frame-rate', type=positive_float, metavar='FPS',
+                        help='frames per second of a tracker export whose Record Rate is N/A '
+                             '(and whose trial name carries none, like "11kfps"); not for bags')
+    parser.add_argument('--length-unit', choices=LENGTH_UNITS,
+                        help='the unit the export\'s coordinates are really in, overriding its '
+                             'Export Units (px: converted by the calibration\'s mm/pixel); '
+                             'not for bags')
+
+
+def export_options(args) -> dict:
+    """--frame-rate and --length-unit as load_tracks's keyword arguments."""
+    return {'frame_rate_hz': getattr(args, 'frame_rate', None),
+            'length_unit': getattr(args, 'length_unit', None)}
+
+
+def given_conditions(args) -> dict:
+    """The trial conditions given as options, checked against their ranges (ConditionError)."""
+    from ..trial.conditions import ConditionError, check_value
+
+    given = {}
+    for name, option in CONDITION_OPTIONS.items():
+        value = getattr(args, name, None)
+        if value is not None:
+            try:
+                check_value(name, value)
+            except ConditionError as exc:
+                raise ConditionError(f'{option}: {exc}') from None
+            given[name] = value
+    return given

@@ -1,0 +1,38 @@
+"""The rig's node table: every node of the stack, its module and class, and what it is. Both
+the simulated rig in one process (sim_rig) and the stack's bring-up (bringup: one process, or
+one per node) build from this one table, and the launch file is checked against it.
+
+Each node's module is ``mantis_rig.nodes.<name>``, run as ``python -m`` or as the console
+script of the same name (setup.py)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import importlib
+
+
+@dataclass(frozen=True)
+class NodeEntry:
+    name: str          # node name, module mantis_rig.nodes.<name> and console script
+    class_name: str
+    role: str          # 'world' (sim only), 'device' (on a backend) or 'supervisor'
+
+    def node_class(self):
+        return getattr(importlib.import_module(f'mantis_rig.nodes.{self.name}'),
+                       self.class_name)
+
+
+NODES = (
+    NodeEntry('sim_world_node', 'SimWorldNode', 'world'),
+    NodeEntry('stage_node', 'StageNode', 'device'),
+    NodeEntry('loadcell_node', 'LoadcellNode', 'device'),
+    NodeEntry('camera_node', 'CameraNode', 'device'),
+    NodeEntry('supervisor_node', 'SupervisorNode', 'supervisor'),
+)
+BY_NAME = {entry.name: entry for entry in NODES}
+WORLD = next(entry for entry in NODES if entry.role == 'world')
+DEVICES = tuple(entry for entry in NODES if entry.role == 'device')
+SUPERVISOR = next(entry for entry in NODES if entry.role == 'supervisor')
+#: the process that holds the world and the device nodes in sim mode (nodes.sim_rig)
+SIM_RIG_PROCESS = 'sim_rig'
+#: the device node that drives the stage (stopped first in an emergency)
+STAGE_NODE = 'stage_node'
