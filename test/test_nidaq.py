@@ -533,6 +533,43 @@ def test_fake_matches_the_real_nidaqmx_api():
         assert fake_bases == real_bases, name
 
 
+def test_fake_system_api_matches_the_real_nidaqmx():
+    """The device listing mantis doctor reads: nidaqmx.system's System, Device and their
+    collections."""
+    real_nidaqmx()
+    from nidaqmx.system import Device, System
+    from nidaqmx.system._collections.device_collection import DeviceCollection
+    from nidaqmx.system._collections.physical_channel_collection import (
+        PhysicalChannelCollection,
+    )
+    fake = fakes_nidaq
+    assert isinstance(inspect.getattr_static(System, 'local'), staticmethod)
+    assert isinstance(inspect.getattr_static(fake.System, 'local'), staticmethod)
+    methods = [
+        (fake.Device, Device, ['__init__', 'self_test_device']),
+        (fake.DeviceCollection, DeviceCollection, ['__iter__', '__len__', '__getitem__']),
+        (fake.PhysicalChannelCollection, PhysicalChannelCollection,
+         ['__iter__', '__len__', '__getitem__', '__contains__']),
+    ]
+    for fake_cls, real_cls, names in methods:
+        for name in names:
+            if name == '__init__' and fake_cls is not fake.Device:
+                continue
+            assert normalized_signature(getattr(fake_cls, name)) == \
+                normalized_signature(getattr(real_cls, name)), f'{real_cls.__name__}.{name}'
+    properties = [
+        (fake.System, System, ['devices', 'driver_version']),
+        (fake.Device, Device, ['name', 'product_type', 'dev_serial_num', 'dev_is_simulated',
+                               'ai_physical_chans', 'do_lines', 'co_physical_chans']),
+        (fake.DeviceCollection, DeviceCollection, ['device_names']),
+        (fake.PhysicalChannelCollection, PhysicalChannelCollection, ['channel_names']),
+    ]
+    for fake_cls, real_cls, names in properties:
+        for name in names:
+            assert isinstance(inspect.getattr_static(real_cls, name), property), name
+            assert isinstance(inspect.getattr_static(fake_cls, name), property), name
+
+
 def test_fake_constants_and_error_codes_match_the_real_ones():
     real_nidaqmx()
     from nidaqmx import constants

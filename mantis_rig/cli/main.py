@@ -7,7 +7,7 @@ import sys
 from mantis_sim.errors import InputError
 from mantis_sim.model import SimulationError
 
-from . import analyze, import_tracking, recover, replay, sim, sweep, trial
+from . import analyze, doctor, import_tracking, recover, replay, sim, sweep, trial
 from .options import USAGE_ERROR
 
 
@@ -21,6 +21,7 @@ def build_parser() -> argparse.ArgumentParser:
     recover.add_commands(commands)
     trial.add_commands(commands)
     sweep.add_commands(commands)
+    doctor.add_commands(commands)
     return parser
 
 

@@ -40,19 +40,27 @@ def check_backend(backend: str) -> str:
 
 
 def make_stage(backend: str, port: Optional[WorldPort] = None, *,
-               serial_port: str = DEFAULT_SERIAL_PORT, counts_per_mm: Optional[float] = None,
+               serial_port: str = DEFAULT_SERIAL_PORT, stage_serial_number: str = '',
+               counts_per_mm: Optional[float] = None,
                limits: Optional[StageLimits] = None, force_ceiling_n: Optional[float] = None,
                max_force_age_s: Optional[float] = 0.5,
                clock_s: Optional[Callable[[], float]] = None) -> Stage:
-    """With `force_ceiling_n`, the stage comes wrapped in a StageGuard: the caller must then
+    """On hardware, `stage_serial_number` (a KDC101's serial number, or 'auto' for the only
+    KDC101 on the machine) finds the port instead of `serial_port`
+    (discovery.choose_kdc101: DiscoveryError, naming what was found, unless exactly one
+    controller matches); the stage's `choice` attribute says which port and why.
+    With `force_ceiling_n`, the stage comes wrapped in a StageGuard: the caller must then
     feed it every force reading (StageGuard.observe_force), or pulls are refused and stopped
     once the readings are older than `max_force_age_s` on `clock_s` (default: monotonic wall
     time; the simulated rig passes its simulated clock)."""
     if check_backend(backend) == 'sim':
         stage: Stage = SimStage(_world(port, 'stage'), limits)
     else:
+        from .discovery import choose_kdc101
         from .kdc101 import Z8_COUNTS_PER_MM, Kdc101Stage
-        stage = Kdc101Stage(serial_port, counts_per_mm or Z8_COUNTS_PER_MM, limits=limits)
+        choice = choose_kdc101(serial_port, stage_serial_number)
+        stage = Kdc101Stage(choice.port, counts_per_mm or Z8_COUNTS_PER_MM, limits=limits)
+        stage.choice = choice
     if force_ceiling_n is None:
         return stage
     clock = {'clock_s': clock_s} if clock_s is not None else {}

@@ -56,6 +56,17 @@ FAULT_FLAGS = ('motion_error', 'instrument_error', 'overtemp', 'voltage_fault',
 
 
 @dataclass(frozen=True)
+class StageAxis:
+    """The stage the controller reports (MOT_GET_STAGEAXISPARAMS), in its own units."""
+
+    part_number: str
+    serial_number: str
+    counts_per_unit: int
+    min_position_counts: int
+    max_position_counts: int
+
+
+@dataclass(frozen=True)
 class _Motion:
     kind: str          # 'home', 'absolute' or 'velocity'
     direction: int     # +1 forward (position increases), -1 reverse, 0 none
@@ -145,7 +156,7 @@ class Kdc101Stage(Stage):
             self._port = serial.Serial(
                 self.port_path, baudrate=115200, bytesize=serial.EIGHTBITS,
                 parity=serial.PARITY_NONE, stopbits=serial.STOPBITS_ONE, rtscts=True,
-                timeout=READ_POLL_S, write_timeout=self.reply_timeout_s)
+                timeout=READ_POLL_S, write_timeout=self.reply_timeout_s, exclusive=True)
         except (serial.SerialException, OSError, ValueError) as exc:
             self._port = None
             raise DeviceError(f'cannot open KDC101 port {self.port_path}: {exc}') from exc
@@ -215,6 +226,22 @@ class Kdc101Stage(Stage):
             serial_number=str(msg.serial_number),
             firmware='.'.join(str(v) for v in msg.firmware_version))
         return self._info
+
+    def stage_axis(self, timeout_s: Optional[float] = None) -> Optional[StageAxis]:
+        """The stage the controller says it drives (MOT_REQ_STAGEAXISPARAMS), or None when it
+        does not answer within `timeout_s` (default reply_timeout_s): not every APT
+        controller's firmware answers this request."""
+        seq = self._seq_now()
+        self._send(apt.mot_req_stageaxisparams(CONTROLLER, HOST, CHANNEL))
+        msg = self._wait_for(lambda m: m.msg == 'mot_get_stageaxisparams', seq,
+                             self.reply_timeout_s if timeout_s is None else timeout_s,
+                             'MOT_GET_STAGEAXISPARAMS', fail_on_timeout=False)
+        if msg is None:
+            return None
+        return StageAxis(
+            part_number=msg.part_no_axis.split(b'\x00')[0].decode('ascii', 'replace').strip(),
+            serial_number=str(msg.serial_num), counts_per_unit=int(msg.counts_per_unit),
+            min_position_counts=int(msg.min_pos), max_position_counts=int(msg.max_pos))
 
     def home(self, timeout_s: float = 60.0) -> None:
         self._settle_pending_stop()

@@ -51,6 +51,9 @@ class StageNode(DeviceNode):
     DEVICE = 'stage'
     PARAMETERS = (
         Param('serial_port', backends.DEFAULT_SERIAL_PORT, 'hardware: KDC101 serial port'),
+        Param('stage_serial_number', '', 'hardware: the KDC101 by its serial number (27...), or '
+              '"auto" for the only KDC101 on the machine; when set, it chooses the port '
+              'instead of serial_port (mantis doctor lists the controllers)'),
         Param('counts_per_mm', Z8_COUNTS_PER_MM, 'hardware: encoder counts per mm (Z8: '
               '34554.96 per the APT protocol, 34304 per the stage data sheet)', (1e3, 1e6)),
         Param('move_speed_m_per_s', 1.0e-3, 'speed of /stage/position_command moves, m/s',
@@ -90,10 +93,14 @@ class StageNode(DeviceNode):
     def open_device(self, port):
         stage = backends.make_stage(self.backend_name, port,
                                     serial_port=self.param('serial_port'),
+                                    stage_serial_number=self.param('stage_serial_number'),
                                     counts_per_mm=self.param('counts_per_mm'),
                                     force_ceiling_n=self.param('force_ceiling_n'),
                                     max_force_age_s=self.param('max_force_age_s'),
                                     clock_s=self._guard_clock())
+        choice = getattr(getattr(stage, 'stage', stage), 'choice', None)
+        if choice is not None and self.param('stage_serial_number'):
+            self.get_logger().info(f'stage port {choice.reason}')
         stage.open()
         try:
             info = stage.identify()

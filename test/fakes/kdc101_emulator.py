@@ -35,6 +35,7 @@ MOT_MOVE_HOME, MOT_MOVE_HOMED = 0x0443, 0x0444
 MOT_MOVE_ABSOLUTE, MOT_MOVE_VELOCITY = 0x0453, 0x0457
 MOT_MOVE_COMPLETED, MOT_MOVE_STOP, MOT_MOVE_STOPPED = 0x0464, 0x0465, 0x0466
 MOT_REQ_USTATUSUPDATE, MOT_GET_USTATUSUPDATE, MOT_ACK_USTATUSUPDATE = 0x0490, 0x0491, 0x0492
+MOT_REQ_STAGEAXISPARAMS, MOT_GET_STAGEAXISPARAMS = 0x04F1, 0x04F2
 
 # status bits (APT spec, DC servo)
 FWD_LIMIT, REV_LIMIT, MOVING_FWD, MOVING_REV = 0x1, 0x2, 0x10, 0x20
@@ -57,11 +58,14 @@ class Kdc101Emulator:
                  homed: bool = False, travel_mm: float = 25.0, home_speed_mm_s: float = 20.0,
                  status_period_s: float = 0.1, ack_timeout_s: float = 3.0,
                  serial_number: int = 27000123, model: bytes = b'KDC101',
-                 firmware: tuple = (3, 0, 10)):
+                 firmware: tuple = (3, 0, 10), stage_part: Optional[bytes] = b'MTS25-Z8'):
+        """stage_part: the stage the controller reports in MOT_GET_STAGEAXISPARAMS (with
+        travel_mm and counts_per_mm); None: the request is not answered."""
         self.counts_per_mm = counts_per_mm
         self.status_period_s = status_period_s
         self.ack_timeout_s = ack_timeout_s
         self._serial_number, self._model, self._firmware = serial_number, model, firmware
+        self._stage_part, self._travel_mm = stage_part, travel_mm
         # the controller's stored homing parameters (reverse, reverse switch, 0.1 mm offset);
         # the default stored velocity is deliberately far above the rig's 2.4 mm/s ceiling
         self.homeparams = {'home_dir': 2, 'limit_switch': 1,
@@ -276,6 +280,13 @@ class Kdc101Emulator:
             p = self.velparams
             self._send(long_message(MOT_GET_VELPARAMS, struct.pack(
                 '<H3l', CHANNEL, p['min_velocity'], p['acceleration'], p['max_velocity'])))
+        elif msgid == MOT_REQ_STAGEAXISPARAMS and self._stage_part is not None:
+            counts = round(self.counts_per_mm)
+            data = struct.pack('<HHH16sLL5l4H4L', CHANNEL, 1, 1, self._stage_part.ljust(16, b'\0'),
+                               self._serial_number, counts, 0,
+                               round(self._travel_mm * self.counts_per_mm), 0, 0, 0,
+                               0, 0, 0, 0, 0, 0, 0, 0)
+            self._send(long_message(MOT_GET_STAGEAXISPARAMS, data))
         elif msgid == MOT_MOVE_HOME:
             self._mode, self._target, self._homed = 'home', 0.0, False
             self._direction = -1 if self._position > 0 else 1

@@ -2,8 +2,11 @@
 
 `FakeDaqSystem` is the hardware behind the fake: a scripted input signal (volts as a function
 of the physical sample index), faults to inject, and a record of what the tasks did.
-`system.install(monkeypatch)` puts fake `nidaqmx`, `nidaqmx.constants`, `nidaqmx.errors` and
-`nidaqmx.stream_readers` modules into sys.modules, so the backends import them unchanged.
+`system.install(monkeypatch)` puts fake `nidaqmx`, `nidaqmx.constants`, `nidaqmx.errors`,
+`nidaqmx.stream_readers` and `nidaqmx.system` modules into sys.modules, so the backends (and
+the device discovery of `mantis doctor`) import them unchanged. `devices` names NI MAX's
+devices: a name is a USB-6363, a `FakeDevice` sets the product type, serial number, simulated
+flag and the channels it has (a task on a channel the device lacks fails as DAQmx does).
 Names, signatures and defaults follow the real package (checked by test_nidaq.py when the real
 package is importable). Misuse the real driver would not catch as clearly (reading a stopped
 task, using a closed one) raises FakeMisuse so that a test fails.
@@ -11,6 +14,7 @@ task, using a closed one) raises FakeMisuse so that a test fails.
 from __future__ import annotations
 
 from collections import deque
+from dataclasses import dataclass
 from enum import Enum
 import sys
 import types
@@ -95,6 +99,7 @@ INVALID_DEVICE_ID = -200220
 DEV_CANNOT_BE_ACCESSED = -201003
 PAL_TRANSFER_ABORTED = -50405
 CAN_NOT_PERFORM_OP_WHILE_TASK_RUNNING = -200479
+PHYSICAL_CHAN_DOES_NOT_EXIST = -200170
 UNKNOWN = -1
 FAKE_ERROR_CODES = {
     'SAMPLES_NOT_YET_AVAILABLE': SAMPLES_NOT_YET_AVAILABLE,
@@ -104,6 +109,7 @@ FAKE_ERROR_CODES = {
     'DEV_CANNOT_BE_ACCESSED': DEV_CANNOT_BE_ACCESSED,
     'PAL_TRANSFER_ABORTED': PAL_TRANSFER_ABORTED,
     'CAN_NOT_PERFORM_OP_WHILE_TASK_RUNNING': CAN_NOT_PERFORM_OP_WHILE_TASK_RUNNING,
+    'PHYSICAL_CHAN_DOES_NOT_EXIST': PHYSICAL_CHAN_DOES_NOT_EXIST,
     'UNKNOWN': UNKNOWN,
 }
 
@@ -415,6 +421,138 @@ class AnalogSingleChannelReader:
         return samples
 
 
+
+# --- nidaqmx.system ----------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class FakeDevice:
+    """One device as NI MAX lists it: a USB-6363 unless told otherwise."""
+
+    name: str
+    product_type: str = 'USB-6363'
+    serial_num: int = 0x1F2E3D4
+    simulated: bool = False
+    ai_channels: int = 32
+    do_lines_per_port: tuple = ((0, 32), (1, 8), (2, 8))
+    counters: int = 4
+
+    def channel_names(self, kind):
+        if kind == 'ai':
+            return [f'{self.name}/ai{i}' for i in range(self.ai_channels)]
+        if kind == 'do':
+            return [f'{self.name}/port{port}/line{line}'
+                    for port, lines in self.do_lines_per_port for line in range(lines)]
+        return [f'{self.name}/ctr{i}' for i in range(self.counters)]
+
+
+class PhysicalChannelCollection:
+    def __init__(self, names):
+        self._names = list(names)
+
+    def __contains__(self, item):
+        return item in self._names
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def __len__(self):
+        return len(self._names)
+
+    def __getitem__(self, index):
+        return self._names[index]
+
+    @property
+    def channel_names(self):
+        return list(self._names)
+
+
+class Device:
+    system: FakeDaqSystem   # set on the per-system subclass
+
+    def __init__(self, name, *, grpc_options=None):
+        self._name = name
+
+    def _spec(self):
+        if self.system.removed:
+            raise DaqError('Device cannot be accessed.', DEV_CANNOT_BE_ACCESSED)
+        return self.system.device_specs[self._name]
+
+    @property
+    def name(self):
+        return self._name
+
+    @property
+    def product_type(self):
+        return self._spec().product_type
+
+    @property
+    def dev_serial_num(self):
+        return self._spec().serial_num
+
+    @property
+    def dev_is_simulated(self):
+        return self._spec().simulated
+
+    @property
+    def ai_physical_chans(self):
+        return PhysicalChannelCollection(self._spec().channel_names('ai'))
+
+    @property
+    def do_lines(self):
+        return PhysicalChannelCollection(self._spec().channel_names('do'))
+
+    @property
+    def co_physical_chans(self):
+        return PhysicalChannelCollection(self._spec().channel_names('co'))
+
+    def self_test_device(self):
+        self._spec()
+        self.system.events.append((self._name, 'self_test_device', None))
+
+
+class DeviceCollection:
+    def __init__(self, system):
+        self._system = system
+
+    @property
+    def device_names(self):
+        return sorted(self._system.device_specs)
+
+    def __len__(self):
+        return len(self._system.device_specs)
+
+    def __iter__(self):
+        return (self._system.Device(name) for name in self.device_names)
+
+    def __getitem__(self, index):
+        names = self.device_names
+        if isinstance(index, str):
+            if index not in names:
+                raise DaqError(f'Device identifier is invalid. Device Specified: {index}',
+                               INVALID_DEVICE_ID)
+            return self._system.Device(index)
+        return self._system.Device(names[index])
+
+
+class System:
+    system: FakeDaqSystem   # set on the per-system subclass
+
+    @staticmethod
+    def local():
+        raise FakeMisuse('System.local() of the unbound fake: use FakeDaqSystem.modules()')
+
+    @property
+    def devices(self):
+        if not self.system.driver_installed:
+            raise DaqNotFoundError('Could not find an installation of NI-DAQmx.')
+        return DeviceCollection(self.system)
+
+    @property
+    def driver_version(self):
+        if not self.system.driver_installed:
+            raise DaqNotFoundError('Could not find an installation of NI-DAQmx.')
+        return (2025, 1, 0)
+
 # --- the fake hardware -------------------------------------------------------------------------
 
 class FakeDaqSystem:
@@ -422,7 +560,9 @@ class FakeDaqSystem:
 
     def __init__(self, signal_v=None, devices=('Dev1',)):
         self.signal_v = signal_v or (lambda index: np.zeros(index.shape))
-        self.devices = set(devices)
+        specs = [d if isinstance(d, FakeDevice) else FakeDevice(d) for d in devices]
+        self.device_specs = {spec.name: spec for spec in specs}
+        self.devices = set(self.device_specs)
         self.driver_installed = True
         self.removed = False
         self.position = 0             # physical index of the next sample the AI will deliver
@@ -433,6 +573,17 @@ class FakeDaqSystem:
         self.line_levels = {}         # DO line -> last level written
         self.read_faults = deque()
         self.Task = type('Task', (Task,), {'system': self})
+        self.Device = type('Device', (Device,), {'system': self})
+        bound = self
+
+        class BoundSystem(System):
+            system = bound
+
+            @staticmethod
+            def local():
+                return BoundSystem()
+
+        self.System = BoundSystem
 
     # fault injection
     def inject_overrun(self, lost_samples, code=SAMPLES_NO_LONGER_AVAILABLE):
@@ -455,6 +606,11 @@ class FakeDaqSystem:
         if device not in self.devices:
             raise DaqError(f'Device identifier is invalid. Device Specified: {device}',
                            INVALID_DEVICE_ID, task_name)
+        spec = self.device_specs[device]
+        if not any(name in spec.channel_names(kind) for kind in ('ai', 'do', 'co')):
+            raise DaqError(f'Physical channel specified does not exist on this device. '
+                           f'Physical Channel Name: {name}', PHYSICAL_CHAN_DOES_NOT_EXIST,
+                           task_name)
 
     def volts(self, task, samples):
         index = np.arange(self.position, self.position + samples)
@@ -478,14 +634,17 @@ class FakeDaqSystem:
             setattr(errors, cls.__name__, cls)
         stream_readers = types.ModuleType('nidaqmx.stream_readers')
         stream_readers.AnalogSingleChannelReader = AnalogSingleChannelReader
+        system = types.ModuleType('nidaqmx.system')
+        system.System, system.Device = self.System, self.Device
         package = types.ModuleType('nidaqmx')
         package.__path__ = []
+        package.system = system
         package.Task = self.Task
         package.DaqError, package.DaqReadError = DaqError, DaqReadError
         package.constants, package.errors = constants, errors
         package.stream_readers = stream_readers
         return {'nidaqmx': package, 'nidaqmx.constants': constants, 'nidaqmx.errors': errors,
-                'nidaqmx.stream_readers': stream_readers}
+                'nidaqmx.stream_readers': stream_readers, 'nidaqmx.system': system}
 
     def install(self, monkeypatch):
         for name, module in self.modules().items():
@@ -493,4 +652,4 @@ class FakeDaqSystem:
         return self
 
 
-__all__ = ['FakeDaqSystem', 'FakeMisuse', 'CONSTANT_ENUMS', 'FAKE_ERROR_CODES']
+__all__ = ['FakeDaqSystem', 'FakeDevice', 'FakeMisuse', 'CONSTANT_ENUMS', 'FAKE_ERROR_CODES']
