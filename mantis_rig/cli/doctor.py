@@ -764,8 +764,9 @@ def _stop_and_say(guard, stage) -> str:
         guard.stop()
         state = stage.state()
     except DeviceError as exc:
-        return (f'the stage could not be told to stop ({_one_line(exc)}): its controller ends '
-                f'the jog by itself within {JOG_M * 1e3:g} mm, inside the soft limits; check it')
+        return (f'the stage could not be told to stop ({_one_line(exc)}): the controller ends '
+                f'the move it was given by itself, at its target inside the soft limits (or '
+                f'at home); check the stage')
     if state.moving:
         return f'the stage still reports motion at {state.position_m * 1e3:.3f} mm: stop it'
     return f'the stage stopped at {state.position_m * 1e3:.3f} mm'
