@@ -9,4 +9,5 @@ cd "$(dirname "$0")/.."
 scripts/bootstrap.sh --test
 . scripts/ros_env.sh
 .venv/bin/ruff check .
+.venv/bin/mantis doctor --backend sim    # the commissioning check on the simulated rig
 .venv/bin/python -m pytest -q -n "${MANTIS_TEST_WORKERS:-3}" --dist loadfile "$@"

@@ -687,7 +687,7 @@ class _ForceFeed:
                 self.guard.observe_force(block)
                 self.blocks += 1
                 self.first.set()
-        except DeviceError as exc:
+        except Exception as exc:   # any failure of the feed: the stage must not pull blind
             self.error = _one_line(exc)
             try:
                 self.guard.stop()
