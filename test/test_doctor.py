@@ -155,6 +155,13 @@ def test_discovery_without_nidaqmx_says_so(monkeypatch):
     monkeypatch.setitem(sys.modules, 'nidaqmx.system', None)
     listing = discovery.list_daq_devices()
     assert listing.devices == () and 'nidaqmx is not installed' in listing.problem
+    assert 'pip install mantis_rig[nidaq]' in listing.fix
+
+
+def test_discovery_without_the_driver_says_so(make_daq):
+    make_daq().driver_installed = False
+    listing = discovery.list_daq_devices()
+    assert 'the NI-DAQmx driver is not' in listing.problem and 'installdriver' in listing.fix
 
 
 def test_discovery_lists_daq_devices(make_daq):

@@ -303,7 +303,7 @@ def check_daq_devices(report: Report, params) -> Optional[DaqDeviceView]:
     listing = list_daq_devices()
     if listing.problem is not None:
         report.add('daq: devices', FAIL, f'cannot list NI DAQ devices: {listing.problem}',
-                   'pip install mantis_rig[nidaq] and the NI-DAQmx driver, then check the '
+                   (listing.fix or 'reinstall the NI-DAQmx driver') + ', then check the '
                    'USB-6363 in NI MAX')
         return None
     if not listing.devices:
@@ -528,7 +528,11 @@ def choose_stage_port(report: Report, params) -> Optional[str]:
         return choice.port
     found = list_kdc101()
     listed = describe_found(found)
-    if found and choice.port not in [c.port for c in found]:
+    if not found:
+        report.add(name, WARN, f'serial_port {choice.port} (parameter); {listed}',
+                   'connect the KDC101 (USB and its power supply); on a USB hub or a virtual '
+                   'machine check that the port reaches this system')
+    elif choice.port not in [c.port for c in found]:
         report.add(name, WARN, f'serial_port {choice.port} (parameter) is none of the KDC101s '
                    f'listed: {listed}', f'set stage_node stage_serial_number to '
                    f'{found[0].serial_number} (or serial_port to {found[0].port})')

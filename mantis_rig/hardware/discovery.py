@@ -27,6 +27,11 @@ KDC101_SERIAL_PREFIX = '27'          # KDC101 serial numbers: 27xxxxxx
 ANY_KDC101 = 'auto'                  # stage_serial_number: the only KDC101 on the machine
 
 
+PACKAGE_FIX = ('pip install mantis_rig[nidaq] (nidaqmx 1.7.0) and the NI-DAQmx driver from '
+               'ni.com (Linux: python -m nidaqmx installdriver)')
+DRIVER_FIX = 'install the NI-DAQmx driver from ni.com (Linux: python -m nidaqmx installdriver)'
+
+
 class DiscoveryError(DeviceError):
     """No device, or more than one, matches what the parameters ask for; the message lists
     what was found."""
@@ -68,6 +73,7 @@ class DaqListing:
     devices: tuple = ()
     problem: Optional[str] = None
     driver_version: Optional[str] = None
+    fix: Optional[str] = None           # what to install, when `problem` is a missing piece
 
 
 @dataclass(frozen=True)
@@ -144,8 +150,8 @@ def list_daq_devices() -> DaqListing:
         system_module = importlib.import_module('nidaqmx.system')
         errors = importlib.import_module('nidaqmx.errors')
     except ImportError:
-        from .nidaq import INSTALL_HINT
-        return DaqListing(problem=INSTALL_HINT)
+        return DaqListing(problem='the Python package nidaqmx is not installed (the nidaq '
+                                  'extra)', fix=PACKAGE_FIX)
     try:
         system = system_module.System.local()
         version = system.driver_version
@@ -156,10 +162,10 @@ def list_daq_devices() -> DaqListing:
                       simulated=bool(device.dev_is_simulated))
             for device in system.devices)
     except errors.Error as exc:
-        from .nidaq import INSTALL_HINT
         message = ' '.join(str(exc).split())
         if getattr(exc, 'error_code', None) is None:      # DaqNotFoundError: no driver
-            return DaqListing(problem=f'{message}: {INSTALL_HINT}')
+            return DaqListing(problem=f'nidaqmx is installed, the NI-DAQmx driver is not: '
+                                      f'{message}', fix=DRIVER_FIX)
         return DaqListing(problem=f'NI-DAQmx could not list the devices: {message}')
     version_text = '.'.join(str(part) for part in version) if version is not None else None
     return DaqListing(devices=devices, driver_version=version_text)
