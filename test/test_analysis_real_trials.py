@@ -11,6 +11,7 @@ published; where the body rests at maximum contraction for a few ms their phase 
 anywhere in the rest.
 """
 import csv
+from dataclasses import replace
 import math
 import re
 
@@ -146,10 +147,8 @@ def test_frames_with_one_arm_marker_left_are_gaps(results):
 def test_units_that_contradict_the_numbers_are_refused(results):
     """The 'Micrometers' export that holds millimetres: L1 comes out at 0.02 mm."""
     tracks, _ = results['air_23mm_2p3mmps_trial1_tracker_export.xlsx']
-    scaled = MarkerTracks(tracks.time_s, tracks.frames,
-                          {n: xy * 1e-3 for n, xy in tracks.markers_mm.items()},
-                          tracks.handedness, tracks.tilt_deg,
-                          {**tracks.source, 'length_unit': 'micrometers'})
+    scaled = replace(tracks, markers_mm={n: xy * 1e-3 for n, xy in tracks.markers_mm.items()},
+                     length_unit='micrometers')
     with pytest.raises(ImplausibleResult, match='--length-unit mm'):
         analyze_tracks(scaled, AnalysisParams(d_t_mm=23))
 
@@ -212,7 +211,7 @@ def test_every_real_file_loads(rel, real_tracks):
     rate = 1.0 / np.median(np.diff(tracks.time_s))
     assert rate == pytest.approx(stated['rate'], rel=1e-3)
     if stated['rate'] is not None and rel.endswith('.xlsx'):
-        assert tracks.source['frame_rate_hz'] == stated['rate']
+        assert tracks.frame_rate_hz == stated['rate']
     assert len(tracks.body_markers) >= 2 and len(tracks.arm_markers) >= 2
     assert np.all(np.diff(tracks.time_s) > 0)
     for name, xy in tracks.markers_mm.items():       # a lost marker is NaN, never (-1, -1)

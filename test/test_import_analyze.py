@@ -1,14 +1,17 @@
 """import-tracking -> bag -> analyze: the bag path gives the same analysis as the tracking file;
 damaged bags are analysed up to the damage; bad spreadsheets name what is missing."""
 import json
+import math
+import re
 import shutil
 
 from conftest import data_file, rewritten_copy
 from mcap.reader import make_reader
 import numpy as np
+from openpyxl import load_workbook
 import pytest
 
-from mantis_rig.analysis import analyze_tracks, load_tracks
+from mantis_rig.analysis import TrackFormatError, analyze_tracks, load_tracks
 from mantis_rig.analysis.bag_input import read_trial_bag
 from mantis_rig.analysis.tracking_import import ANGLES_TOPIC
 from mantis_rig.cli import main
@@ -382,3 +385,100 @@ def test_a_bags_trial_conditions_are_checked_like_the_command_lines(imported_bag
     code, _, err = analyze_json(capsys, bag)
     assert code == 2, err
     assert f'trial conditions: {why}' in err
+
+
+# ------------------------------------------- one motion, exported in another camera frame
+PAIR = data_file('real_trials/air_23mm_19kfps_pair.xlsx')
+
+
+def reexported(source, dest, handedness: str, tilt_deg: float):
+    """``source`` (a left-handed export) as the tracker would have exported the same video with
+    its calibration set to ``handedness`` and ``tilt_deg``, written with openpyxl.
+
+    The conventions are those of tracking_export.md and kinematics._right_handed: a
+    left-handed export at tilt t holds R(t) p (p: the image's axes, y down; R counter-
+    clockwise in that frame), a right-handed one at the same tilt the same with y negated
+    (y up). So the left-handed tilt-180 original becomes, right-handed at tilt 0, its x
+    mirrored; at a tilt t, that turned by t. Lost markers stay (-1, -1)."""
+    wb = load_workbook(source)
+    ws = wb.worksheets[0]
+    header = calibration = None
+    for row in ws.iter_rows():
+        label = str(row[0].value or '').strip()
+        if label.startswith('Calibration 1'):
+            calibration = row[1]
+        if label == 'Frame':
+            header = row[0].row
+    text = calibration.value
+    assert 'Left-Handed' in text
+    old_tilt = float(re.search(r'Tilt: ([-\d.]+) degrees', text).group(1))
+    calibration.value = re.sub(r'Tilt: [-\d.]+ degrees', f'Tilt: {tilt_deg:g} degrees',
+                               text).replace('Left-Handed', handedness.title() + '-Handed')
+    turn = math.radians(tilt_deg - old_tilt)
+    c, s = round(math.cos(turn), 15), round(math.sin(turn), 15)
+    flip = -1.0 if handedness == 'right' else 1.0
+    for row in ws.iter_rows(min_row=header + 2):
+        for x_cell, y_cell in zip(row[2::2], row[3::2]):
+            x, y = x_cell.value, y_cell.value
+            if x is None or (x, y) == (-1, -1):
+                continue
+            x_cell.value, y_cell.value = c * x - s * y, flip * (s * x + c * y)
+    wb.save(dest)
+    return dest
+
+
+def test_a_right_handed_tilted_export_gives_the_same_analysis_directly_and_via_a_bag(
+        tmp_path, capsys):
+    """The same strike exported Right-Handed at a tilt of 180° (the original: Left-Handed at
+    180°): `mantis analyze` on the file and on the bag that `mantis import-tracking` makes of
+    it give the original's numbers, the body pivot included (the bag carries the frame's
+    handedness and tilt)."""
+    variant = reexported(PAIR, tmp_path / 'right_180.xlsx', 'right', 180.0)
+    tracks = load_tracks(variant)
+    assert (tracks.handedness, tracks.tilt_deg) == ('right', 180.0)
+    assert main(['import-tracking', str(variant), '--out', str(tmp_path / 'bag')]) == 0
+    capsys.readouterr()
+    bag = read_trial_bag(tmp_path / 'bag')
+    assert (bag.tracks.handedness, bag.tracks.tilt_deg) == ('right', 180.0)
+    original = analyze_json(capsys, PAIR)[1]
+    for path in (variant, tmp_path / 'bag'):
+        code, report, err = analyze_json(capsys, path)
+        assert code == 0, err
+        for key, value in original.items():
+            if key == 'input' or value is None or isinstance(value, str):
+                assert key == 'input' or report[key] == value, (path, key)
+                continue
+            assert report[key] == pytest.approx(value, rel=1e-9, abs=1e-12, nan_ok=True), \
+                (path, key)
+    assert original['peak_tip_speed_mps'] == pytest.approx(24.17, abs=0.01)
+
+
+def test_a_mirror_image_is_refused_on_both_routes(tmp_path, capsys):
+    """Only the calibration's system changed, not the numbers: the file shows the robot
+    mirrored, and both routes refuse it alike (the bag route used to take it for the
+    left-handed original)."""
+    wb = load_workbook(PAIR)
+    for row in wb.worksheets[0].iter_rows(max_row=40):
+        if str(row[0].value or '').startswith('Calibration 1'):
+            row[1].value = row[1].value.replace('Left-Handed', 'Right-Handed')
+    wb.save(tmp_path / 'mirrored.xlsx')
+    code, _, direct = run(capsys, 'analyze', tmp_path / 'mirrored.xlsx')
+    assert code != 0 and 'mJ is outside' in direct
+    run(capsys, 'import-tracking', tmp_path / 'mirrored.xlsx', '--out', tmp_path / 'bag')
+    code, _, via_bag = run(capsys, 'analyze', tmp_path / 'bag')
+    assert code != 0 and via_bag.split(': ', 2)[2] == direct.split(': ', 2)[2]
+
+
+def test_a_bag_states_its_camera_frame(imported_bag, tmp_path):
+    """A bag's trial conditions give the tracks their handedness and tilt; a bag that states
+    none is the tracker's left-handed frame with the tilt unknown."""
+    assert (read_trial_bag(imported_bag).tracks.handedness,
+            read_trial_bag(imported_bag).tracks.tilt_deg) == ('left', None)
+    turned = rewritten_copy(imported_bag, tmp_path / 'turned',
+                            conditions={'handedness': 'right', 'tilt_deg': '90.0'})
+    tracks = read_trial_bag(turned).tracks
+    assert (tracks.handedness, tracks.tilt_deg) == ('right', 90.0)
+    for key, value in (('handedness', 'up'), ('tilt_deg', 'north')):
+        bad = rewritten_copy(imported_bag, tmp_path / key, conditions={key: value})
+        with pytest.raises(TrackFormatError, match=key):
+            read_trial_bag(bad)

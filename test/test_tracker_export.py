@@ -122,7 +122,7 @@ def test_the_standard_layout(tmp_path):
     np.testing.assert_allclose(tracks.time_s, np.round(np.arange(N) / RATE, 7), atol=1e-15)
     assert_markers(tracks, markers)
     assert tracks.source['format'] == 'xlsx'
-    assert tracks.source['frame_rate_hz'] == RATE
+    assert tracks.frame_rate_hz == RATE
     assert tracks.handedness == 'left' and tracks.tilt_deg == 0.0
 
 
@@ -132,7 +132,7 @@ def test_labels_on_other_rows_with_extra_blank_rows(tmp_path):
     rows = [[]] * 3 + header_block(extra=True) + [[], []] + tracking_rows(markers)
     path = write_xlsx(tmp_path / 'moved.xlsx', rows)
     tracks = load_tracks(path)
-    assert tracks.n_frames == N and tracks.source['frame_rate_hz'] == RATE
+    assert tracks.n_frames == N and tracks.frame_rate_hz == RATE
     assert tracks.source['operator'] == 'someone'
     assert tracks.source['export units'] == 'Millimeters'
     assert tracks.source['calibration_units_per_pixel'] == MM_PER_PX
@@ -161,7 +161,7 @@ def test_calibration_reaches_the_tracks(tmp_path):
     tracks = load_tracks(write_xlsx(tmp_path / 'turned.xlsx', rows))
     assert tracks.tilt_deg == 180.0 and tracks.handedness == 'right'
     assert tracks.source['calibration_units_per_pixel'] == MM_PER_PX
-    meta = te.parse_export_rows(rows, 'turned.xlsx')['meta']
+    meta = te.parse_export_rows(rows, 'turned.xlsx').source
     assert meta['calibration_origin_px'] == (226.5, 261.4)
     assert meta['calibration_tilt_deg'] == 180.0
 
@@ -214,7 +214,7 @@ def test_rate_not_stated_comes_from_the_trial_name(tmp_path):
     path, markers = frame_number_export(tmp_path, VIDEO_11K, 'na.xlsx')
     tracks = load_tracks(path)
     np.testing.assert_allclose(tracks.time_s, np.arange(N) / 11000.0, rtol=1e-12)
-    assert tracks.source['frame_rate_hz'] == 11000.0
+    assert tracks.frame_rate_hz == 11000.0
     assert tracks.source['frame_rate_source'] == 'trial name'
     assert_markers(tracks, markers)
 
@@ -233,7 +233,7 @@ def test_rate_given_by_the_caller(tmp_path):
     assert_markers(tracks, markers)
     # Given where the name carries one: the caller's wins.
     path, _ = frame_number_export(tmp_path, VIDEO_11K, 'na11k.xlsx')
-    assert load_tracks(path, frame_rate_hz=8000.0).source['frame_rate_hz'] == 8000.0
+    assert load_tracks(path, frame_rate_hz=8000.0).frame_rate_hz == 8000.0
 
 
 def test_rate_given_against_the_record_rate_is_refused(tmp_path):
@@ -332,7 +332,7 @@ def test_headerless_csv_crlf_trailing_comma_columns_out_of_order(tmp_path):
     tracks = load_tracks(path)
     assert tracks.source['format'] == 'csv' and tracks.n_frames == N
     np.testing.assert_allclose(tracks.time_s, np.round(np.arange(N) / RATE, 7), atol=1e-15)
-    assert tracks.source['frame_rate_hz'] == pytest.approx(RATE, rel=1e-3)
+    assert tracks.frame_rate_hz == pytest.approx(RATE, rel=1e-3)
     assert tracks.tilt_deg is None                # the CSV does not state the camera's tilt
     assert np.isnan(tracks.markers_mm['ma2'][30:90]).all()
     markers['ma2'][30:90] = np.nan
@@ -349,7 +349,7 @@ def test_csv_with_the_header_block(tmp_path):
     path = tmp_path / 'with_header_track.csv'
     path.write_text(text, newline='')
     tracks = load_tracks(path)
-    assert tracks.source['frame_rate_hz'] == 10000.0
+    assert tracks.frame_rate_hz == 10000.0
     assert tracks.source['calibration_units_per_pixel'] == MM_PER_PX
     np.testing.assert_allclose(tracks.time_s, np.round(np.arange(N) / 10000, 7), atol=1e-15)
     assert_markers(tracks, markers, atol=1e-8)

@@ -1,9 +1,15 @@
 """Read a trial bag into analysis inputs: MarkerTracks (mm) and the tendon force samples.
 
 The marker frames come from ``/camera/markers`` (marker blocks, metres, camera frame; see
-:mod:`mantis_rig.recording.marker_block`), the force from ``/loadcell/force_block`` (force
-blocks, see :mod:`mantis_rig.recording.force_block`). Both carry times on the trial's clock, so
-the force is used for the tendon's work only where its time span overlaps the frames'.
+:mod:`mantis_rig.recording.marker_block`), converted to millimetres here (the one conversion
+between the bag and the analysis), the force from ``/loadcell/force_block`` (force blocks, see
+:mod:`mantis_rig.recording.force_block`). Both carry times on the trial's clock, so the force is
+used for the tendon's work only where its time span overlaps the frames'.
+
+The camera frame's orientation is the bag's: ``trial_conditions`` ``handedness`` ('left', the
+tracker's and the simulated camera's convention, where the bag states none) and ``tilt_deg``
+(absent: not stated, the analysis finds it from the markers), as ``mantis import-tracking``
+writes them from the export's calibration.
 
 A damaged bag (cut short, corrupted) is read up to the damage: :attr:`TrialInput.problems`
 says what was wrong and :attr:`TrialInput.truncated` is set; whether the frames before the
@@ -12,6 +18,7 @@ damage suffice is for the analysis to decide.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import math
 from pathlib import Path
 import warnings
 
@@ -20,7 +27,8 @@ import numpy as np
 from ..recording import BagError, BagReader, TruncatedBagWarning
 from ..recording.force_block import force_block_from_msg
 from ..recording.marker_block import concatenate, marker_block_from_msg
-from .tracking import MarkerTracks, TrackFormatError, load_tracks
+from .tracking import load_tracks
+from .tracks import HANDEDNESS, MarkerTracks, TrackFormatError
 
 MARKERS_TOPIC = '/camera/markers'
 FORCE_TOPIC = '/loadcell/force_block'
@@ -114,13 +122,39 @@ def read_trial_bag(path) -> TrialInput:
     tracks = MarkerTracks(
         time_s=time_s, frames=_frame_numbers(time_s),
         markers_mm={name: xy[order] * _MM_PER_M for name, xy in frames.markers_m.items()},
-        handedness='left',
+        **_camera_frame(conditions, path),
         source={'path': str(path), 'format': 'bag', 'topic': MARKERS_TOPIC, **conditions})
     tracks.validate()
     force_t, force = _force_samples(force_blocks, time_s)
     return TrialInput(tracks=tracks, force_time_s=force_t, force_N=force, problems=problems,
                       truncated=bool(problems),
                       conditions=dict(conditions))
+
+
+def _camera_frame(conditions: dict, path) -> dict:
+    """The tracks' handedness, tilt and frame rate as the bag's trial conditions state them
+    (``tilt_deg``; ``source_calibration_tilt_deg`` in bags imported before it was written
+    apart); TrackFormatError naming a value that does not read as one."""
+    handedness = str(conditions.get('handedness', 'left')).strip().lower()
+    if handedness not in HANDEDNESS:
+        raise TrackFormatError(f'{path}: trial condition handedness {handedness!r}: expected '
+                               f'one of {HANDEDNESS}')
+    tilt = conditions.get('tilt_deg', conditions.get('source_calibration_tilt_deg'))
+    tilt_deg = _number(tilt)
+    if tilt not in (None, '') and tilt_deg is None:
+        raise TrackFormatError(f'{path}: trial condition tilt_deg {tilt!r} is not a finite '
+                               'angle')
+    rate = _number(conditions.get('frame_rate_hz'))      # else the frames' median step
+    return {'handedness': handedness, 'tilt_deg': tilt_deg,
+            'frame_rate_hz': rate if rate is not None and rate > 0 else None}
+
+
+def _number(value) -> float | None:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        return None
+    return number if math.isfinite(number) else None
 
 
 def _force_samples(blocks, frame_time_s):

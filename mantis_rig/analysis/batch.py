@@ -172,13 +172,10 @@ def _row(path, trial: str, status: str, reason: str = '', **values) -> dict:
 
 
 def _frame_rate(tracks) -> float | None:
-    """The export's frame rate, else the one of the median step of the times."""
-    try:
-        rate = float(tracks.source.get('frame_rate_hz'))
-    except (TypeError, ValueError):
-        rate = None
+    """The frame rate the tracks state, else the one of the median step of the times."""
+    rate = tracks.frame_rate_hz
     if rate is not None and math.isfinite(rate) and rate > 0:
-        return rate
+        return float(rate)
     steps = np.diff(tracks.time_s)
     return float(1.0 / np.median(steps)) if len(steps) and np.median(steps) > 0 else None
 

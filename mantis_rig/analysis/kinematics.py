@@ -38,7 +38,7 @@ Conventions (those of physics.md, in a right-handed frame):
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 
 import numpy as np
@@ -138,12 +138,9 @@ def _right_handed(tracks: MarkerTracks, names: list[str]) -> np.ndarray:
 
 def robot_turn_rad(tracks: MarkerTracks) -> float:
     """Rotation (rad, counter-clockwise in the right-handed frame) that undoes the camera's
-    tilt: the calibration's, or else the orientation the markers show
-    (``tracks.source['inferred_tilt_deg']``, set by :func:`complete_tracks`)."""
-    tilt = tracks.tilt_deg
-    if tilt is None:
-        tilt = tracks.source.get('inferred_tilt_deg', 0.0)
-    return math.radians(float(tilt))
+    tilt: the calibration's, or the one :func:`fit_linkage` found from the markers
+    (``tracks.tilt_inferred``); none where neither states one."""
+    return math.radians(float(tracks.tilt_deg or 0.0))
 
 
 def complete_tracks(tracks: MarkerTracks) -> MarkerTracks:
@@ -171,9 +168,8 @@ def complete_tracks(tracks: MarkerTracks) -> MarkerTracks:
                      'are gaps')
     source = dict(tracks.source)
     source['gaps'] = '; '.join(notes) if notes else 'lost markers placed from the tracked ones'
-    out = MarkerTracks(time_s=tracks.time_s[keep], frames=tracks.frames[keep],
-                       markers_mm={n: xy[keep] for n, xy in markers.items()},
-                       handedness=tracks.handedness, tilt_deg=tracks.tilt_deg, source=source)
+    out = replace(tracks, time_s=tracks.time_s[keep], frames=tracks.frames[keep],
+                  markers_mm={n: xy[keep] for n, xy in markers.items()}, source=source)
     out.validate()
     return out
 
@@ -344,9 +340,7 @@ def fit_linkage(tracks: MarkerTracks, arm_axis_offset_rad: float = 0.0,
     if tracks.tilt_deg is None and math.cos(angles.theta1_cam_rad[0] - NOMINAL_THETA1_RAD) < 0:
         # No calibration states the camera's tilt, and the link points away from where the
         # robot's frame has it: the camera looks the other way round (a tilt of 180°).
-        source = {**tracks.source, 'inferred_tilt_deg': 180.0}
-        tracks = MarkerTracks(tracks.time_s, tracks.frames, tracks.markers_mm,
-                              tracks.handedness, None, source)
+        tracks = replace(tracks, tilt_deg=180.0, tilt_inferred=True)
         fit, angles = _fit_linkage(tracks, arm_axis_offset_rad, speed_share)
     fit.robot_turn_deg = math.degrees(robot_turn_rad(tracks))
     return fit, angles

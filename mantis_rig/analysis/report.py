@@ -61,9 +61,10 @@ class AnalysisParams:
     # are laid out with (physics.md: 19 mm). None: the fitted L1 instead. Tip speed and
     # kinetic energy use the fitted L1.
     tendon_L1_mm: float | None = 19.0
-    # Frame of summary()['body_pivot_mm']: 'x_mirrored' (the tracker's x negated: the frame of
-    # the published reference pivot), 'tracker' (as recorded) or 'right_handed' (y negated
-    # for a left-handed tracker: the analysis and model frame).
+    # Frame of summary()['body_pivot_mm']: 'x_mirrored' (the left-handed tracker frame's x
+    # negated: the frame of the published reference pivot), 'tracker' (as recorded) or
+    # 'right_handed' (the left-handed tracker frame's y negated); both of these are the same
+    # for a right-handed export of the same video (see pivot_in_frame).
     pivot_frame: str = 'x_mirrored'
     inertia: InertiaParams = field(default_factory=InertiaParams)
     # Smoothing: relative velocity precision and the widest window.
@@ -227,8 +228,7 @@ def check_plausible(result: TrialAnalysis, tracks: MarkerTracks | None = None) -
 def _length_problem(L1_mm: float, tracks: MarkerTracks | None) -> str:
     lo, hi = L1_RANGE_MM
     text = f'L1 = {L1_mm:.4g} mm is outside the robot\'s {lo:g}-{hi:g} mm'
-    source = tracks.source if tracks is not None else {}
-    unit = source.get('length_unit')
+    unit = tracks.length_unit if tracks is not None else None
     stated = f'the file says {unit}' if unit else 'the file states no unit'
     if lo <= L1_mm * 1e3 <= hi:
         return (f'{text}: the lengths look a thousand times too small ({stated}); if the '
@@ -243,14 +243,19 @@ PIVOT_FRAMES = ('x_mirrored', 'tracker', 'right_handed')
 
 
 def pivot_in_frame(pivot_tracker_mm: np.ndarray, handedness: str, frame: str) -> np.ndarray:
-    """A point given in the tracker's frame, expressed in one of :data:`PIVOT_FRAMES`."""
+    """A point given in the tracker's frame, expressed in one of :data:`PIVOT_FRAMES`.
+
+    'x_mirrored' and 'right_handed' are the lab's left-handed export's frame (at the
+    calibration's tilt) with x, or y, negated: a right-handed export of the same video, whose
+    y is the left-handed one's negated, gives the same point."""
+    point = np.array(pivot_tracker_mm, float)
     if frame == 'tracker':
-        return np.array(pivot_tracker_mm, float)
+        return point
+    left = point * np.array([1.0, -1.0]) if handedness == 'right' else point
     if frame == 'x_mirrored':
-        return np.array(pivot_tracker_mm, float) * np.array([-1.0, 1.0])
+        return left * np.array([-1.0, 1.0])
     if frame == 'right_handed':
-        flip = [1.0, -1.0] if handedness == 'left' else [1.0, 1.0]
-        return np.array(pivot_tracker_mm, float) * np.array(flip)
+        return left * np.array([1.0, -1.0])
     raise ValueError(f'pivot_frame {frame!r}: expected one of {PIVOT_FRAMES}')
 
 

@@ -27,7 +27,7 @@ import re
 
 import numpy as np
 
-from mantis_sim.errors import InputError
+from .tracks import MarkerTracks, TrackFormatError, frame_numbers
 
 LOST_MARKER = -1.0
 # Millimetres per unit of the tracker's ``Export Units`` / ``Calibration Units``.
@@ -37,11 +37,6 @@ UNIT_MM = {'millimeters': 1.0, 'millimetres': 1.0, 'mm': 1.0,
 LENGTH_UNITS = ('mm', 'um', 'px')
 _RATE_IN_NAME = re.compile(r'(?<![0-9a-z])(\d+(?:[.p]\d+)?)\s*kfps', re.IGNORECASE)
 _FEATURE = re.compile(r'\(([^()]*)\)\s*$')
-
-
-class TrackFormatError(InputError):
-    """A tracking file does not have a layout the readers accept, or contradicts itself (this
-    module's and :mod:`.tracking`'s one error for bad tracking files)."""
 
 
 def is_export_header(cells: list) -> bool:
@@ -102,11 +97,12 @@ def rate_from_name(name: str) -> float | None:
 
 
 def parse_export_rows(rows: list[list], fname: str, frame_rate_hz: float | None = None,
-                      length_unit: str | None = None) -> dict:
-    """Parse the rows of an export (header block optional) into arrays and metadata.
-
-    Returns ``{'time_s', 'frames', 'markers_mm' (name -> (n, 2), NaN where lost), 'meta'}``.
-    """
+                      length_unit: str | None = None,
+                      source: dict | None = None) -> MarkerTracks:
+    """The tracks of an export's rows (header block optional): millimetres, NaN where a
+    marker is lost, the calibration's handedness and tilt, the frame rate and the unit the
+    numbers were in as the tracks' fields; the header block (and how the rate and unit were
+    found) in ``source``, after the caller's ``source`` (path, format). Not yet validated."""
     start = next((i for i, r in enumerate(rows) if is_export_header(r)), None)
     if start is None:
         raise TrackFormatError(f'{fname}: no column header row "Frame, Time, Feature 1 (...)"')
@@ -129,16 +125,19 @@ def parse_export_rows(rows: list[list], fname: str, frame_rate_hz: float | None 
         if len(bad):
             raise TrackFormatError(f'{fname}: row {start + 3 + int(bad[0])}: {what} is not a '
                                     'number')
-    time_s, rate_note = _time_base(meta, frames, raw_time, fname, frame_rate_hz)
-    to_mm, unit_note = _length_scale(meta, fname, length_unit)
+    time_s, rate, rate_note = _time_base(meta, frames, raw_time, fname, frame_rate_hz)
+    to_mm, unit, unit_note = _length_scale(meta, fname, length_unit)
     markers = {}
     for name, (ix, iy) in columns.items():
         markers[name] = lost_as_gaps(table[:, [ix, iy]]) * to_mm
-    meta.update(rate_note)
-    meta.update(unit_note)
     if ignored:
         meta['ignored_features'] = ','.join(ignored)
-    return {'time_s': time_s, 'frames': frames, 'markers_mm': markers, 'meta': meta}
+    return MarkerTracks(
+        time_s=time_s, frames=frame_numbers(frames, fname), markers_mm=markers,
+        handedness=meta.get('calibration_handedness', 'left'),
+        tilt_deg=meta.get('calibration_tilt_deg'),
+        source={**(source or {}), **meta, **rate_note, **unit_note},
+        frame_rate_hz=rate, length_unit=unit)
 
 
 def read_export_xlsx_rows(path: Path) -> list[list]:
@@ -282,7 +281,7 @@ def _trial_name(meta: dict, fname: str) -> str:
 
 
 def _time_base(meta: dict, frames: np.ndarray, raw_time: np.ndarray, fname: str,
-               frame_rate_hz: float | None) -> tuple[np.ndarray, dict]:
+               frame_rate_hz: float | None) -> tuple[np.ndarray, float | None, dict]:
     stated = meta.get('record rate')
     rate = None
     if stated not in (None, '') and stated.strip().upper() != 'N/A':
@@ -310,18 +309,19 @@ def _time_base(meta: dict, frames: np.ndarray, raw_time: np.ndarray, fname: str,
                 'holds frame numbers) and the trial name carries none (like "11kfps"): give '
                 'it with --frame-rate FPS')
         time_s = raw_time / rate
-        return time_s, {'frame_rate_hz': rate, 'frame_rate_source': source}
+        return time_s, rate, {'frame_rate_source': source}
     if stated is None:          # a header-less CSV: the times are seconds
         steps = np.diff(raw_time)
         if len(steps) and np.median(steps) > 0:
             measured = 1.0 / float(np.median(steps))
-            return raw_time, {'frame_rate_hz': rate or measured,
-                              'frame_rate_source': source if rate else 'time column'}
-    return raw_time, {'frame_rate_hz': rate, 'frame_rate_source': source}
+            return raw_time, rate or measured, {
+                'frame_rate_source': source if rate else 'time column'}
+    return raw_time, rate, {'frame_rate_source': source}
 
 
-def _length_scale(meta: dict, fname: str, length_unit: str | None) -> tuple[float, dict]:
-    """(millimetres per exported unit, what it came from)."""
+def _length_scale(meta: dict, fname: str, length_unit: str | None,
+                  ) -> tuple[float, str, dict]:
+    """(millimetres per exported unit, the unit, what it came from)."""
     per_pixel = meta.get('calibration_units_per_pixel')
     cal_units = meta.get('calibration_units', 'millimeters')
     if length_unit is not None:
@@ -335,10 +335,10 @@ def _length_scale(meta: dict, fname: str, length_unit: str | None) -> tuple[floa
             scale = per_pixel * UNIT_MM.get(cal_units, 1.0)
         else:
             scale = {'mm': 1.0, 'um': 1e-3}[length_unit]
-        return scale, {'length_unit': length_unit, 'length_unit_source': 'given'}
+        return scale, length_unit, {'length_unit_source': 'given'}
     unit = (meta.get('export units') or '').strip().lower()
     if not unit:
-        return 1.0, {'length_unit': 'mm', 'length_unit_source': 'default (no Export Units)'}
+        return 1.0, 'mm', {'length_unit_source': 'default (no Export Units)'}
     if unit in ('pixels', 'pixel', 'px'):
         if per_pixel is None:
             raise TrackFormatError(f'{fname}: Export Units are Pixels but no calibration '
@@ -346,9 +346,9 @@ def _length_scale(meta: dict, fname: str, length_unit: str | None) -> tuple[floa
         cal_scale = UNIT_MM.get(cal_units)
         if cal_scale is None:
             raise TrackFormatError(f'{fname}: unknown Calibration Units {cal_units!r}')
-        return per_pixel * cal_scale, {'length_unit': 'px', 'length_unit_source': 'Export Units'}
+        return per_pixel * cal_scale, 'px', {'length_unit_source': 'Export Units'}
     scale = UNIT_MM.get(unit)
     if scale is None:
         raise TrackFormatError(f'{fname}: unknown Export Units {meta.get("export units")!r} '
                                 '(expected Millimeters, Micrometers or Pixels)')
-    return scale, {'length_unit': unit, 'length_unit_source': 'Export Units'}
+    return scale, unit, {'length_unit_source': 'Export Units'}

@@ -2,8 +2,9 @@
 
 Marker naming: body markers start with ``mb``, arm markers with ``ma`` (``mb1``, ``ma2``, ...).
 Positions are millimetres in the camera frame. The tracking software's frame is left-handed
-(image y axis points down); :class:`MarkerTracks` records that in ``handedness`` and the
-kinematics flip y once to work in a right-handed frame.
+(image y axis points down) unless its calibration says otherwise; :class:`~.tracks.MarkerTracks`
+records that in ``handedness`` (and the calibration's tilt in ``tilt_deg``), and the kinematics
+turn the tracks once into the robot's right-handed frame.
 
 Accepted CSV layout (optionally gzipped, detected from the ``.gz`` suffix)::
 
@@ -18,7 +19,6 @@ cells) are NaN: gaps, never positions.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 import gzip
 from pathlib import Path
 import re
@@ -27,70 +27,12 @@ import zlib
 import numpy as np
 
 from . import tracker_export as te
-from .tracker_export import TrackFormatError
+from .tracks import MIN_FRAMES, MarkerTracks, TrackFormatError, frame_numbers
 
-MIN_FRAMES = 50
+__all__ = ['MIN_FRAMES', 'MarkerTracks', 'TrackFormatError', 'load_tracks', 'read_marker_csv',
+           'read_marker_xlsx']
+
 _MARKER_RE = re.compile(r'^(m[ab]\w*?)_([xy])(?:_mm)?$')
-
-
-@dataclass
-class MarkerTracks:
-    """Marker positions over time (camera frame, millimetres)."""
-
-    time_s: np.ndarray
-    frames: np.ndarray
-    markers_mm: dict[str, np.ndarray]
-    handedness: str = 'left'
-    # The calibration's tilt (degrees): the tracker's axes turned against the image. None
-    # where the file does not state it (a header-less CSV): the markers tell the robot's frame.
-    tilt_deg: float | None = None
-    source: dict = field(default_factory=dict)
-
-    @property
-    def body_markers(self) -> list[str]:
-        return sorted(n for n in self.markers_mm if n.startswith('mb'))
-
-    @property
-    def arm_markers(self) -> list[str]:
-        return sorted(n for n in self.markers_mm if n.startswith('ma'))
-
-    @property
-    def n_frames(self) -> int:
-        return len(self.time_s)
-
-    def validate(self) -> None:
-        """Raise TrackFormatError unless the tracks can be analysed."""
-        if self.n_frames < MIN_FRAMES:
-            raise TrackFormatError(
-                f'too few frames: {self.n_frames} (need at least {MIN_FRAMES})')
-        if len(self.body_markers) < 2:
-            raise TrackFormatError(
-                f'need at least 2 body markers (mb*), found {self.body_markers}')
-        if len(self.arm_markers) < 2:
-            raise TrackFormatError(
-                f'need at least 2 arm markers (ma*), found {self.arm_markers}')
-        if not np.all(np.isfinite(self.time_s)):
-            bad = int(np.nonzero(~np.isfinite(self.time_s))[0][0])
-            raise TrackFormatError(f'time of frame {bad} is not a finite number')
-        if np.any(np.diff(self.time_s) <= 0):
-            bad = int(np.nonzero(np.diff(self.time_s) <= 0)[0][0])
-            raise TrackFormatError(f'time must increase strictly: frame {bad + 1} is not after '
-                                   f'frame {bad}')
-        for name, xy in self.markers_mm.items():
-            if xy.shape != (self.n_frames, 2):
-                raise TrackFormatError(f'marker {name}: shape {xy.shape}, expected (n, 2)')
-            beyond = np.nonzero(np.abs(np.nan_to_num(xy)) > MAX_COORDINATE_MM)[0]
-            if beyond.size:
-                frame = int(beyond[0])
-                raise TrackFormatError(
-                    f'marker {name} in frame {frame} (t = {self.time_s[frame]:.6f} s) is at '
-                    f'{xy[frame].tolist()} mm, beyond any camera\'s field (|x|, |y| up to '
-                    f'{MAX_COORDINATE_MM:g} mm)')
-
-
-# No camera of the rig sees a marker 100 m from its origin: a bigger coordinate is a damaged
-# cell (read as a position, it would wreck every fit), not a position.
-MAX_COORDINATE_MM = 1e5
 
 
 def load_tracks(path: str | Path, frame_rate_hz: float | None = None,
@@ -159,18 +101,12 @@ def read_marker_csv(path: str | Path, frame_rate_hz: float | None = None,
                for name, xy in _markers_from_columns(coord_cols, data, path.name).items()}
     tracks = MarkerTracks(
         time_s=data[:, header.index('time_s')].astype(float),
-        frames=_frame_numbers(data[:, header.index('frame')], path.name),
+        frames=frame_numbers(data[:, header.index('frame')], path.name),
         markers_mm=markers,
         source={'path': str(path), 'format': 'csv'},
     )
     tracks.validate()
     return tracks
-
-
-def _frame_numbers(frames: np.ndarray, fname: str) -> np.ndarray:
-    if not np.all(np.isfinite(frames)) or np.any(np.abs(frames) > 2 ** 53):
-        raise TrackFormatError(f'{fname}: the frame column holds a non-finite or huge value')
-    return frames.astype(np.int64)
 
 
 def read_marker_xlsx(path: str | Path, frame_rate_hz: float | None = None,
@@ -183,16 +119,8 @@ def read_marker_xlsx(path: str | Path, frame_rate_hz: float | None = None,
 
 def _from_export(rows: list, path: Path, fmt: str, frame_rate_hz: float | None,
                  length_unit: str | None) -> MarkerTracks:
-    parsed = te.parse_export_rows(rows, path.name, frame_rate_hz, length_unit)
-    meta = parsed['meta']
-    tracks = MarkerTracks(
-        time_s=parsed['time_s'], frames=_frame_numbers(parsed['frames'], path.name),
-        markers_mm=parsed['markers_mm'],
-        handedness=meta.get('calibration_handedness', 'left'),
-        tilt_deg=meta.get('calibration_tilt_deg'),
-        source={'path': str(path), 'format': fmt,
-                **{k: v for k, v in meta.items() if not isinstance(v, tuple)}},
-    )
+    tracks = te.parse_export_rows(rows, path.name, frame_rate_hz, length_unit,
+                                  source={'path': str(path), 'format': fmt})
     tracks.validate()
     return tracks
 

@@ -10,8 +10,10 @@ imported trials:
   ``['theta1', 'theta3']``: the model's body angle θ1 and the arm angle θ3 relative to the body
   (rad, smoothed) and their rates (rad/s), as :func:`~mantis_rig.analysis.analyze_tracks`
   derives them (pivot fit from the marker arcs, zero-phase adaptive smoothing);
-* metadata ``trial_conditions`` (source file, format, the file's header block, and the d_t and
-  contact angle the user states for the trial) and
+* metadata ``trial_conditions`` (source file, format, the file's header block, the camera
+  frame's ``handedness`` and ``tilt_deg`` (left out where the file states no tilt), the frame
+  rate, and the d_t and contact angle the user states for the trial), which
+  :mod:`.bag_input` reads back, and
   ``tracking_fit`` (fitted body pivot in the tracker's frame as recorded, and L1).
 
 Log times (and JointState stamps) are the file's times shifted so none is negative:
@@ -53,15 +55,20 @@ class ImportReport:
 
 def _conditions(tracks: MarkerTracks, origin_s: float) -> dict:
     source = dict(tracks.source)
+    rate = tracks.frame_rate_hz or 1.0 / float(np.median(np.diff(tracks.time_s)))
     record = {'source_file': str(Path(source.pop('path', '')).resolve()),
               'source_format': source.pop('format', 'unknown'),
               'frames': tracks.n_frames,
-              'frame_rate_hz': f'{1.0 / float(np.median(np.diff(tracks.time_s))):.6g}',
+              'frame_rate_hz': f'{rate:.6g}',
               'markers': ','.join(tracks.markers_mm),
               'handedness': tracks.handedness,
               'time_origin_s': repr(origin_s)}
+    if tracks.length_unit is not None:
+        record['source_length_unit'] = tracks.length_unit
+    if tracks.tilt_deg is not None:
+        record['tilt_deg'] = repr(float(tracks.tilt_deg))
     record.update({f'source_{key}'.replace(' ', '_'): value for key, value in source.items()
-                   if value is not None})
+                   if isinstance(value, (str, int, float))})
     return record
 
 
