@@ -50,7 +50,7 @@ def timeline(seconds):
 def make_message(topic, index, t_ns, rng):
     if topic == '/force':
         first = index * BLOCK_SAMPLES
-        return force_block_to_msg(t_ns, 1_000_000_000 // FORCE_RATE_HZ,
+        return force_block_to_msg(t_ns / 1e9, 1.0 / FORCE_RATE_HZ,
                                   force_samples(BLOCK_SAMPLES, rng, first))
     sec, nanosec = divmod(t_ns, 1_000_000_000)
     if topic == '/stage/state':
@@ -101,10 +101,10 @@ def verify(bag_dir, events, force_sum):
         counts[message.topic] = counts.get(message.topic, 0) + 1
         if message.topic == '/force':
             block = force_block_from_msg(message.message)
-            read_sum += float(block.forces_n.sum())
-            if previous_t0 is not None and abs(block.t0_ns - previous_t0 - period_ns) > 1000:
+            read_sum += float(block.force_n.sum())
+            if previous_t0 is not None and abs(block.t0_s - previous_t0 - period_ns / 1e9) > 1e-6:
                 contiguous = False
-            previous_t0 = block.t0_ns
+            previous_t0 = block.t0_s
     ok = (counts == expected and contiguous and reader.complete
           and abs(read_sum - force_sum) <= 1e-9 * max(1.0, abs(force_sum)))
     return ok, time.perf_counter() - start

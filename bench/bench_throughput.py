@@ -138,7 +138,7 @@ def role_synthetic(args) -> int:
         delay = due - time.monotonic()
         if delay > 0:
             time.sleep(delay)
-        publisher.publish(force_block_to_msg(index * period_ns, period_ns,
+        publisher.publish(force_block_to_msg(index * period_ns / 1e9, period_ns / 1e9,
                                              10.0 + 0.01 * rng.standard_normal(n)))
         index += n
     node.destroy_node()
@@ -180,8 +180,8 @@ def check_bag(path, rate):
     monitor = ForceMonitor(ceiling_n=float('inf'))
     blocks = [force_block_from_msg(m.message)
               for m in BagReader(path).messages(['/loadcell/force_block'])]
-    for block in sorted(blocks, key=lambda b: b.t0_ns):
-        monitor.feed(block.t0_ns * 1e-9, block.period_ns * 1e-9, block.forces_n)
+    for block in sorted(blocks, key=lambda b: b.t0_s):
+        monitor.feed(block.t0_s, block.period_s, block.force_n)
     return monitor, len(blocks)
 
 

@@ -8,6 +8,7 @@ Effects, each applied only when the scene names it:
   (camera.tracking_noise_px rms), then rounded to the tracker's sub-pixel step
   (camera.tracker_resolution_px of camera.pixel_mm).
 Without an effect the sensor passes the truth through. Noise is reproducible from a seed.
+Units: SI (s, m, N, V), as the World's API gives the truth (docs/data_path.md).
 """
 from __future__ import annotations
 

@@ -142,7 +142,8 @@ class World:
         return forces
 
     def marker_positions_m(self, times_s) -> dict:
-        """Marker positions (name -> (n, 2) m) in the camera frame at each time."""
+        """Marker positions (name -> (n, 2) m) in the camera frame at each time: the one place
+        the markers leave the simulation's millimetres for SI (docs/data_path.md)."""
         th1, th3 = self.joint_angles_rad(times_s)
         return {name: xy * 1e-3 for name, xy in self._markers_mm(th1, th3).items()}
 

@@ -22,7 +22,7 @@ def main(bag_path):
     for i in range(MAX_MESSAGES):
         writer.write('/counter', String(data=str(i)), T0_NS + i * 1_000_000)
         forces = [i + k / 1000 for k in range(50)]
-        writer.write('/force', force_block_to_msg(T0_NS + i * 1_000_000, 20_000, forces),
+        writer.write('/force', force_block_to_msg((T0_NS + i * 1_000_000) / 1e9, 20e-6, forces),
                      T0_NS + i * 1_000_000 + 1)
         durable = writer.durable_message_count
         if durable > reported:

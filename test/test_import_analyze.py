@@ -178,7 +178,7 @@ def bag_with_force(path, tracks, newtons_scale=1.0):
             bag.write('/camera/markers', msg, int(t_ns[min((i + 1) * 1000, len(t_ns)) - 1]))
         for start in range(0, len(force), block):
             bag.write('/loadcell/force_block', force_block_to_msg(
-                start * period_ns, period_ns, force[start:start + block]),
+                start * period_ns / 1e9, period_ns / 1e9, force[start:start + block]),
                 (start + block) * period_ns)
     return force
 
@@ -368,7 +368,7 @@ def test_bag_contents_that_pass_the_crc_but_are_wrong_are_refused_with_the_reaso
 
 def test_a_force_block_with_an_impossible_start_time_is_refused():
     from mantis_rig.recording.force_block import force_block_from_msg, force_block_to_msg
-    msg = force_block_to_msg(1_000_000, 50_000, np.ones(10))
+    msg = force_block_to_msg(1e-3, 50e-6, np.ones(10))
     msg.data = [float('nan'), *list(msg.data)[1:]]
     with pytest.raises(ValueError, match='start time nan s'):
         force_block_from_msg(msg)

@@ -167,9 +167,10 @@ def test_a_client_sees_the_trial_live_and_a_stalled_one_does_not_slow_it(tmp_pat
         assert decoded == sum(s.message_count for s in [summary.statistics])
 
     blocks = sorted((force_block_from_msg(m) for t, _, _, m in
-                     reader_bag.messages(['/loadcell/force_block'])), key=lambda b: b.t0_ns)
+                     reader_bag.messages(['/loadcell/force_block'])), key=lambda b: b.t0_s)
     for before, after in zip(blocks, blocks[1:]):
-        assert after.t0_ns == before.t0_ns + before.forces_n.size * before.period_ns
+        assert after.t0_s == pytest.approx(before.t0_s + before.force_n.size * before.period_s,
+                                           abs=1e-6)
 
 
 @pytest.mark.parametrize('address, why', [

@@ -53,7 +53,8 @@ def make_message(topic, i):
     """A deterministic, field-rich message number i of a topic."""
     sec, nanosec = divmod(T0_NS + i * 1_000_000, 1_000_000_000)
     if topic == '/force':
-        return force_block_to_msg(T0_NS + i * 10_000_000, 50_000, np.arange(200) * 0.01 + i)
+        return force_block_to_msg((T0_NS + i * 10_000_000) / 1e9, 50e-6,
+                                  np.arange(200) * 0.01 + i)
     if topic == '/joint_states':
         # effort not empty: Fast CDR pads an empty trailing float64[] with 4 alignment bytes
         # (as real Jazzy publishers do) and rosbags 0.11.9 rejects that as a size mismatch.
@@ -211,8 +212,8 @@ def test_our_reader_round_trip(reference_bag):
     assert {t: i.message_count for t, i in reader.topics.items()} == \
         {t: N_PER_TOPIC for t in TYPES}
     block = force_block_from_msg(got[0].message)
-    assert block.t0_ns == pytest.approx(T0_NS, abs=300) and block.period_ns == 50_000
-    assert block.forces_n.tolist() == pytest.approx((np.arange(200) * 0.01).tolist())
+    assert block.t0_s == pytest.approx(T0_NS / 1e9, abs=3e-7) and block.period_s == 50e-6
+    assert block.force_n.tolist() == pytest.approx((np.arange(200) * 0.01).tolist())
     assert [m.topic for m in read_bag(path, topics=['/events'])] == ['/events'] * N_PER_TOPIC
 
 
@@ -394,7 +395,7 @@ def test_sigkill_mid_write_then_recover(tmp_path):
     counters = [int(m.message.data) for m in got if m.topic == '/counter']
     assert counters == list(range(len(counters)))  # no gap, in order
     blocks = [force_block_from_msg(m.message) for m in got if m.topic == '/force']
-    assert [b.forces_n[3] for b in blocks] == pytest.approx([i + 0.003
+    assert [b.force_n[3] for b in blocks] == pytest.approx([i + 0.003
                                                              for i in range(len(blocks))])
     assert abs(len(blocks) - len(counters)) <= 1
 

@@ -116,10 +116,10 @@ def test_camera_frames_cover_the_strike(pulled_trial):
     assert frames is not None and len(frames.time_s) > 1000
     assert frames.time_s[0] < world.phase_start_s['II'] < world.peak_time_s < frames.time_s[-1]
     assert np.allclose(np.diff(frames.time_s), 1 / 19_000.0)
-    assert sorted(frames.markers_mm) == ['ma1', 'ma2', 'mb1', 'mb2', 'mb3']
+    assert sorted(frames.markers_m) == ['ma1', 'ma2', 'mb1', 'mb2', 'mb3']
     camera = pulled_trial['scene'].camera
     step = camera.pixel_mm * camera.tracker_resolution_px
-    xy = frames.markers_mm['ma2']
+    xy = frames.markers_m['ma2'] * 1e3                                  # metres, SI
     assert np.allclose(xy / step, np.round(xy / step), atol=1e-6)   # the tracker's 0.1 px
     assert not np.allclose(xy / camera.pixel_mm, np.round(xy / camera.pixel_mm), atol=1e-6)
     arm_travel = np.linalg.norm(xy[-1] - xy[0])

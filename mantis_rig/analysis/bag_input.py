@@ -161,9 +161,8 @@ def _force_samples(blocks, frame_time_s):
     """Concatenated (time s, force N) of the blocks if they overlap the frames, else Nones."""
     if not blocks:
         return None, None
-    times = np.concatenate([b.t0_ns / 1e9 + np.arange(len(b.forces_n)) * (b.period_ns / 1e9)
-                            for b in blocks])
-    forces = np.concatenate([b.forces_n for b in blocks])
+    times = np.concatenate([b.t0_s + np.arange(len(b.force_n)) * b.period_s for b in blocks])
+    forces = np.concatenate([b.force_n for b in blocks])
     order = np.argsort(times, kind='stable')
     times, forces = times[order], forces[order]
     if times[-1] < frame_time_s[0] or times[0] > frame_time_s[-1]:

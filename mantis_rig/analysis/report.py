@@ -205,7 +205,8 @@ def check_plausible(result: TrialAnalysis, tracks: MarkerTracks | None = None) -
         raise ImplausibleResult(
             f'max spring energy {energy:.0f} mJ is outside the robot\'s '
             f'{SPRING_ENERGY_RANGE_MJ[0]:g}-{SPRING_ENERGY_RANGE_MJ[1]:g} mJ: the body angle '
-            'does not match the robot\'s frame (camera orientation, or a lost marker)')
+            'does not match the robot\'s frame (camera orientation, a calibration\'s left- or '
+            'right-handed system that does not fit the numbers, or a lost marker)')
     v = s['peak_tip_speed_mps']
     if not (math.isfinite(v) and TIP_SPEED_RANGE_MPS[0] <= v <= TIP_SPEED_RANGE_MPS[1]):
         raise ImplausibleResult(

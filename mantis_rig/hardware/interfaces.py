@@ -170,12 +170,17 @@ class DaqConfig:
 
 @dataclass(frozen=True)
 class ForceBlock:
-    """A block of consecutive samples: sample i was taken at t0_s + i * period_s."""
+    """A block of consecutive load-cell samples, SI: sample i [N] was taken at
+    t0_s + i * period_s [s].
+
+    The rig's one type of force data: a DAQ's read (device clock), and the same block on
+    /loadcell/force_block and in bags (ROS time; recording.force_block carries it).
+    """
 
     t0_s: float
     period_s: float
     force_n: np.ndarray
-    first_index: int                      # index of the first sample since start()
+    first_index: Optional[int] = None    # index of the first sample since start() (DAQ reads)
     overrun: bool = False                 # samples were lost before this block
 
 
@@ -219,10 +224,20 @@ class CameraStatus:
 
 @dataclass
 class MarkerFrames:
-    """Marker positions per frame, as the tracked trials in shared/data: mm, camera frame."""
+    """Marker positions per frame, SI: metres in the camera frame (the tracker's convention:
+    left-handed, image y down, unless a bag's trial conditions say otherwise), times in
+    seconds; a lost marker is NaN.
+
+    The rig's one type of marker data: the simulated camera's recording (device clock), and
+    the same frames on /camera/markers and in bags (ROS time; recording.marker_block carries
+    them). The analysis reads them as MarkerTracks, in millimetres like the tracker's exports.
+    """
 
     time_s: np.ndarray                     # (n,)
-    markers_mm: dict = field(default_factory=dict)   # name -> (n, 2) array; mb1..mb3, ma1, ma2
+    markers_m: dict = field(default_factory=dict)    # name -> (n, 2) array; mb1..mb3, ma1, ma2
+
+    def __len__(self) -> int:
+        return len(self.time_s)
 
 
 def check_camera_config(config: CameraConfig, max_frame_rate_hz: float) -> None:

@@ -3,8 +3,8 @@
 Once armed, the camera's circular buffer runs: frames fall on its frame grid (k / frame rate on
 the world's clock). A trigger keeps the frames from pre_trigger_s before it to post_trigger_s
 after it, never earlier than the arming. The marker positions of those frames come from the
-world, pixel-quantised when the scene asks (effect camera_sampling), in mm as the tracking
-software writes them (camera frame, image y down).
+world, pixel-quantised when the scene asks (effect camera_sampling), in metres as the world
+gives them (camera frame, image y down, as the tracking software writes them).
 """
 from __future__ import annotations
 
@@ -95,6 +95,5 @@ class SimCameraTrigger(CameraTrigger):
         times = self.frame_timestamps()
         if times is None:
             return None
-        markers_m = self.sensor.image(self.port.marker_frames(times, timeout_s))
         return MarkerFrames(time_s=times,
-                            markers_mm={name: xy * 1e3 for name, xy in markers_m.items()})
+                            markers_m=self.sensor.image(self.port.marker_frames(times, timeout_s)))

@@ -135,8 +135,7 @@ class CameraNode(DeviceNode):
         if frames is None or len(frames.time_s) == 0:
             return
         offset_s = self.device_time_offset_s()
-        window = MarkerFrames(frames.time_s + offset_s,
-                              {name: xy * 1e-3 for name, xy in frames.markers_mm.items()})
+        window = MarkerFrames(frames.time_s + offset_s, frames.markers_m)    # on ROS time
         for msg in marker_blocks_to_msgs(window):
             self._markers_pub.publish(msg)
         self._frames_published += len(window)

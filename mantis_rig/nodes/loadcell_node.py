@@ -140,10 +140,13 @@ class LoadcellNode(DeviceNode):
                 return
 
     def _publish(self, block) -> None:
+        # The block moves from the device's clock to ROS time, which counts whole nanoseconds
+        # (the offset is a count of them): the message carries that instant in seconds.
         t0_ns = self._offset_ns + round(block.t0_s * 1e9)
         t0_s = t0_ns * 1e-9
         forces = np.asarray(block.force_n, dtype=np.float64)
-        self._block_pub.publish(force_block_to_msg(t0_ns, round(block.period_s * 1e9), forces))
+        self._block_pub.publish(force_block_to_msg(t0_ns / 1e9, round(block.period_s * 1e9) / 1e9,
+                                                   forces))
         self._blocks += 1
         self._samples += forces.size
         self._last_n = float(forces[-1])

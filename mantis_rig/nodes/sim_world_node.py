@@ -94,7 +94,7 @@ class SimWorldNode(WithoutDefaultEventHandlers, Node):
             block = force_block_from_msg(msg)
         except (ValueError, IndexError):      # not a force block: nothing to pace by
             return
-        self._daq_end_s = (block.t0_ns + block.period_ns * block.forces_n.size) * 1e-9
+        self._daq_end_s = block.t0_s + block.period_s * block.force_n.size
         self._daq_heard = time.monotonic()
 
     def waiting_for_consumers(self) -> bool:

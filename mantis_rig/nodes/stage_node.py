@@ -171,7 +171,7 @@ class StageNode(DeviceNode):
         if stage is None:
             return
         try:
-            trip = stage.observe_force(force_block_from_msg(msg).forces_n)
+            trip = stage.observe_force(force_block_from_msg(msg).force_n)
         except (DeviceError, ValueError) as exc:
             self.fault(f'force guard: {exc}')
             return

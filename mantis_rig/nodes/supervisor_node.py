@@ -242,8 +242,7 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
         if self.sequence is None:
             return
         block = force_block_from_msg(msg)
-        self.sequence.on_force_block(block.t0_ns * 1e-9, block.period_ns * 1e-9,
-                                     block.forces_n)
+        self.sequence.on_force_block(block.t0_s, block.period_s, block.force_n)
 
     def _on_joint_state(self, msg) -> None:
         if msg.position and self.sequence is not None:

@@ -9,46 +9,44 @@ tool can open the bag without a custom interface package:
   ``data[1]`` = sample period [s];
 * ``layout.dim[0]`` = ``{label: 'force_n', size: n, stride: n}``: ``data[2:]`` are n forces [N].
 
+In Python a block is a :class:`~mantis_rig.hardware.interfaces.ForceBlock` (seconds, newtons),
+the rig's one type of force data, as the DAQ reads it.
+
 Why not the alternatives: ``sensor_msgs/ChannelFloat32`` and a bare Float64MultiArray carry no
 time at all; ``sensor_msgs/LaserScan`` has a stamp and ``time_increment`` but tools would draw the
 forces as ranges of a laser scan; one ``WrenchStamped`` per sample means 20,000 messages/s.
 A dedicated ``mantis_rig_interfaces/msg/ForceBlock`` (Header + period + float64[]) is the clean
 long-term answer once the project has an interface package.
 """
-from dataclasses import dataclass
-
 import numpy as np
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
+from mantis_rig.hardware.interfaces import ForceBlock
+
+__all__ = ['ForceBlock', 'force_block_from_msg', 'force_block_to_msg']
+
 FORCE_LABEL = 'force_n'
 HEADER_ELEMENTS = 2
-_NS_PER_S = 1e9
 
 
-@dataclass
-class ForceBlock:
-    t0_ns: int  # time of the first sample
-    period_ns: int
-    forces_n: np.ndarray
-
-
-def force_block_to_msg(t0_ns, period_ns, forces_n):
-    """A Float64MultiArray carrying ``forces_n`` [N] sampled from ``t0_ns`` every ``period_ns``."""
-    forces = np.asarray(forces_n, dtype=np.float64)
+def force_block_to_msg(t0_s, period_s, force_n) -> Float64MultiArray:
+    """A Float64MultiArray carrying ``force_n`` [N] sampled from ``t0_s`` [s, ROS time] every
+    ``period_s`` [s]."""
+    forces = np.asarray(force_n, dtype=np.float64)
     msg = Float64MultiArray()
     msg.layout.data_offset = HEADER_ELEMENTS
     msg.layout.dim = [MultiArrayDimension(label=FORCE_LABEL, size=forces.size,
                                           stride=forces.size)]
     data = np.empty(HEADER_ELEMENTS + forces.size)
-    data[0] = t0_ns / _NS_PER_S
-    data[1] = period_ns / _NS_PER_S
+    data[0] = t0_s
+    data[1] = period_s
     data[HEADER_ELEMENTS:] = forces
     msg.data = data
     return msg
 
 
-def force_block_from_msg(msg):
-    """Inverse of :func:`force_block_to_msg` (t0 rounded to the float64 resolution)."""
+def force_block_from_msg(msg) -> ForceBlock:
+    """Inverse of :func:`force_block_to_msg`: a ForceBlock (t0_s on ROS time, period_s, N)."""
     if msg.layout.data_offset != HEADER_ELEMENTS or not msg.layout.dim \
             or msg.layout.dim[0].label != FORCE_LABEL:
         raise ValueError('not a force block (expected data_offset 2 and dim[0] force_n)')
@@ -61,5 +59,5 @@ def force_block_from_msg(msg):
     if not (np.isfinite(t0_s) and t0_s >= 0 and np.isfinite(period_s) and period_s > 0):
         raise ValueError(f'force block start time {t0_s} s / sample period {period_s} s: '
                          f'expected a finite time >= 0 and a period > 0')
-    return ForceBlock(t0_ns=round(t0_s * _NS_PER_S), period_ns=round(period_s * _NS_PER_S),
-                      forces_n=data[HEADER_ELEMENTS:HEADER_ELEMENTS + size])
+    return ForceBlock(t0_s=t0_s, period_s=period_s,
+                      force_n=data[HEADER_ELEMENTS:HEADER_ELEMENTS + size])

@@ -11,32 +11,29 @@ message per run of consecutive frames, row-major:
 * ``layout.data_offset = 0``; ``data`` holds the n_frames x n_columns values.
 
 Positions are metres in the camera frame, in the tracking software's convention (left-handed:
-image y points down, origin at an arbitrary image point), exactly as ../shared/data's CSV but in
-SI. ``time_s`` is the frame time on the clock of the trial (ROS time; sim time in simulation).
-A lost marker is NaN. One message per frame would mean 19,000-37,000 messages per second of
-video; a block keeps a tracked trial to a few hundred messages.
+image y points down, origin at an arbitrary image point; a bag imported from a right-handed or
+tilted export says so in its trial conditions, ``handedness`` and ``tilt_deg``), as the
+tracker's exports but in SI (REP 103). ``time_s`` is the frame time on the clock of the trial
+(ROS time; sim time in simulation). A lost marker is NaN. One message per frame would mean
+19,000-37,000 messages per second of video; a block keeps a tracked trial to a few hundred
+messages.
+
+In Python a block is a :class:`~mantis_rig.hardware.interfaces.MarkerFrames` (metres, seconds),
+the rig's one type of marker data: no unit changes between the camera and the bag.
 """
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
+from mantis_rig.hardware.interfaces import MarkerFrames
+
+__all__ = ['FRAMES_PER_BLOCK', 'MarkerFrames', 'concatenate', 'marker_block_from_msg',
+           'marker_block_to_msg', 'marker_blocks_to_msgs']
+
 FRAME_LABEL = 'frame'
 TIME_COLUMN = 'time_s'
 FRAMES_PER_BLOCK = 1000
-
-
-@dataclass
-class MarkerFrames:
-    """Frames of marker positions: time_s (n,), markers_m name -> (n, 2) array in metres."""
-
-    time_s: np.ndarray
-    markers_m: dict
-
-    def __len__(self) -> int:
-        return len(self.time_s)
 
 
 def _columns(names) -> list[str]:

@@ -63,7 +63,7 @@ def summarize(path, release_jump_n: float = 1.0) -> TrialSummary:
         elif message.topic == '/camera/trigger_time' and summary.trigger_s is None:
             stamp = message.message.header.stamp
             summary.trigger_s = stamp.sec + stamp.nanosec * 1e-9
-    _force(summary, sorted(blocks, key=lambda b: b.t0_ns), release_jump_n)
+    _force(summary, sorted(blocks, key=lambda b: b.t0_s), release_jump_n)
     if markers:
         frames = concatenate(sorted(markers, key=lambda m: m.time_s[0]))
         summary.marker_frames = len(frames)
@@ -77,10 +77,9 @@ def _force(summary: TrialSummary, blocks, release_jump_n: float) -> None:
     monitor = ForceMonitor(ceiling_n=math.inf, release_jump_n=release_jump_n)
     pull_s = summary.state_time('pulling')
     for block in blocks:
-        t0 = block.t0_ns * 1e-9
-        if pull_s is not None and t0 >= pull_s:
+        if pull_s is not None and block.t0_s >= pull_s:
             monitor.arm_release()
-        monitor.feed(t0, block.period_ns * 1e-9, block.forces_n)
+        monitor.feed(block.t0_s, block.period_s, block.force_n)
     summary.force_samples = monitor.samples
     summary.force_rate_hz = 1.0 / monitor.period_s
     summary.force_start_s = monitor.first_t_s

@@ -57,7 +57,7 @@ def synthetic_messages(duration_s=2.0, marker_blocks=5, frames_per_block=200):
         if k % 5 == 0:
             tf = t + int(1.25 * MS)
             out.append(('/loadcell/force_block', force_block_to_msg(
-                tf - 50 * MS, 50_000, 10.0 + rng.normal(0, 0.05, 1000)), tf))
+                (tf - 50 * MS) / 1e9, 50_000 / 1e9, 10.0 + rng.normal(0, 0.05, 1000)), tf))
         if k % 100 == 1:
             out.append(('/diagnostics', DiagnosticArray(status=[DiagnosticStatus(
                 name='loadcell_node', message=f'ok {k}')]), t + 5 * MS))
