@@ -21,6 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
+from mantis_rig.contract import MARKERS, resolve  # noqa: E402
 from mantis_rig.nodes.ros_env import claim_local_domain  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[1] / 'test' / 'data' / \
@@ -129,7 +130,7 @@ def main() -> None:
         bench_replay(synthetic, 10.0, realtime=args.realtime)
         bench_replay(synthetic, 1.0, realtime=args.realtime)
         if real is not None:
-            bench_replay(real, 10.0, topics=['/camera/markers'], realtime=args.realtime)
+            bench_replay(real, 10.0, topics=[resolve(MARKERS)], realtime=args.realtime)
 
 
 if __name__ == '__main__':

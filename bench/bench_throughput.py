@@ -50,13 +50,13 @@ def role_recorder(args) -> int:
     import rclpy
     from rclpy.node import Node
 
-    from mantis_rig.nodes.recorder import TRIAL_TOPICS, Recorder
+    from mantis_rig import contract
+    from mantis_rig.nodes.recorder import Recorder
     from mantis_rig.recording import BagWriter
 
     rclpy.init()
     node = Node('bench_recorder')
-    topics = [t for t in TRIAL_TOPICS if t.topic in
-              ('/loadcell/force_block', '/loadcell/wrench', '/diagnostics')]
+    topics = [contract.FORCE_BLOCK, contract.WRENCH, contract.DIAGNOSTICS]
     recorder = Recorder(node, topics)
     bag = BagWriter(args.bag)
     recorder.start(bag)
@@ -120,12 +120,13 @@ def role_synthetic(args) -> int:
     from rclpy.node import Node
     from std_msgs.msg import Float64MultiArray
 
-    from mantis_rig.nodes.recorder import reliable
+    from mantis_rig import contract
     from mantis_rig.recording.force_block import force_block_to_msg
 
     rclpy.init()
-    node = Node('loadcell_node')
-    publisher = node.create_publisher(Float64MultiArray, '/loadcell/force_block', reliable(10))
+    node = Node(contract.LOADCELL_NODE)
+    publisher = node.create_publisher(Float64MultiArray, contract.FORCE_BLOCK.name,
+                                      contract.FORCE_BLOCK.qos.publisher())
     period_ns = round(1e9 / args.rate)
     n = args.block_size
     rng = np.random.default_rng(0)
@@ -156,9 +157,12 @@ def lifecycle(node_name: str, transitions, timeout_s=30.0) -> None:
     import rclpy
     from rclpy.node import Node
 
+    from mantis_rig import contract
+
     rclpy.init()
     node = Node('bench_lifecycle')
-    client = node.create_client(ChangeState, f'/{node_name}/change_state')
+    client = node.create_client(ChangeState, contract.node_interface(node_name,
+                                                                     contract.CHANGE_STATE))
     if not client.wait_for_service(timeout_sec=timeout_s):
         raise SystemExit(f'{node_name} did not come up')
     for transition in transitions:
@@ -173,13 +177,14 @@ def lifecycle(node_name: str, transitions, timeout_s=30.0) -> None:
 
 
 def check_bag(path, rate):
+    from mantis_rig import contract
     from mantis_rig.recording import BagReader
     from mantis_rig.recording.force_block import force_block_from_msg
     from mantis_rig.trial.force_monitor import ForceMonitor
 
     monitor = ForceMonitor(ceiling_n=float('inf'))
     blocks = [force_block_from_msg(m.message)
-              for m in BagReader(path).messages(['/loadcell/force_block'])]
+              for m in BagReader(path).messages([contract.resolve(contract.FORCE_BLOCK)])]
     for block in sorted(blocks, key=lambda b: b.t0_s):
         monitor.feed(block.t0_s, block.period_s, block.force_n)
     return monitor, len(blocks)

@@ -16,7 +16,7 @@ Checked only statically (test/test_launch_file.py parses this file: its executab
 setup.py's console scripts, its parameters against the nodes' declared ones and against
 `mantis bringup`'s); `ros2 launch` is not installable from PyPI, so it has not been run here.
 The functions above `generate_launch_description` use nothing from `launch`: the check
-runs them.
+runs them (with the names they take from mantis_rig.contract).
 """
 import os
 import tempfile
@@ -27,22 +27,29 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 import yaml
 
+from mantis_rig.contract import (
+    DEFAULT_SCENE,
+    DEVICE_NODES,
+    SIM_RIG_PROCESS,
+    SIM_WORLD_NODE,
+    SUPERVISOR_NODE,
+)
+
 # launch argument -> (default, description); the defaults are `mantis bringup`'s
 ARGUMENTS = {
     'backend': ('sim', 'device backends: sim or hardware'),
-    'scene': ('air_23mm_rig', 'simulated scene (sim backend; see `mantis scenes`)'),
+    'scene': (DEFAULT_SCENE, 'simulated scene (sim backend; see `mantis scenes`)'),
     'seed': ('0', 'sensor noise seed (sim backend)'),
     'real_time_factor': ('1.0', 'simulated seconds per wall second (sim backend; 0: as fast '
                                 'as the stack keeps up)'),
     'out': ('trials', 'directory under which each trial gets its bag directory'),
 }
-DEVICE_NODES = ('stage_node', 'loadcell_node', 'camera_node')
 
 
 def processes(backend):
     """The executables, in start order: the rig's, then the supervisor's."""
-    rig = ['sim_rig'] if backend == 'sim' else list(DEVICE_NODES)
-    return rig + ['supervisor_node']
+    rig = [SIM_RIG_PROCESS] if backend == 'sim' else list(DEVICE_NODES)
+    return rig + [SUPERVISOR_NODE]
 
 
 def scene_conditions(scene):
@@ -60,7 +67,7 @@ def node_parameters(backend, scene, seed, real_time_factor, out):
     overrides = ['']          # `set`: no scene override (an empty list would have no type)
     params = {}
     if backend == 'sim':
-        params['sim_world_node'] = {'scene': scene, 'seed': seed, 'set': list(overrides),
+        params[SIM_WORLD_NODE] = {'scene': scene, 'seed': seed, 'set': list(overrides),
                                     'real_time_factor': real_time_factor}
     for name in DEVICE_NODES:
         params[name] = {'backend': backend, 'scene': scene, 'seed': seed,
@@ -69,7 +76,7 @@ def node_parameters(backend, scene, seed, real_time_factor, out):
     if backend == 'sim':
         supervisor.update(scene_conditions(scene))
         supervisor['use_sim_time'] = True
-    params['supervisor_node'] = supervisor
+    params[SUPERVISOR_NODE] = supervisor
     return params
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from mantis_rig.contract import MARKERS, resolve
 from mantis_rig.nodes.ros_env import claim_free_domain, release_domain
 
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
@@ -91,7 +92,7 @@ def rewritten_copy(bag, dest, replace=lambda message: message.data, conditions=N
                          {**(reader.metadata('trial_conditions') or {}), **(conditions or {})})
         for channel, _, message in reader.raw_messages():
             data = message.data
-            if channel.topic == '/camera/markers':
+            if channel.topic == resolve(MARKERS):
                 seen += 1
                 if seen == 2:
                     data = replace(message)

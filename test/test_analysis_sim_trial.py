@@ -24,6 +24,7 @@ import pytest
 import rclpy
 
 from mantis_rig.cli import main
+from mantis_rig.contract import SIM_WORLD_NODE, STAGE_NODE
 from mantis_rig.nodes.bringup import Stack, StackConfig
 from mantis_rig.nodes.trial_client import TrialClient
 from mantis_sim.results import simulate
@@ -44,7 +45,7 @@ def trial(tmp_path_factory):
     rclpy.init()                      # on the module's domain (conftest.module_ros_domain)
     stack = Stack(StackConfig(scene=SCENE, real_time_factor=RTF,
                               supervisor={'out': str(out), 'operator_note': 'pytest'},
-                              devices={'stage_node': {'move_speed_m_per_s': 2.0e-3}}),
+                              devices={STAGE_NODE: {'move_speed_m_per_s': 2.0e-3}}),
                   log_dir=out / 'logs')
     client = TrialClient()
     stack.add_node(client)
@@ -52,7 +53,7 @@ def trial(tmp_path_factory):
         stack.start()
         started, message, final = client.run_trial(timeout_s=TRIAL_TIMEOUT_S)
         assert started and final == 'done', (message, final, client.states)
-        world = stack.node('sim_world_node').world
+        world = stack.node(SIM_WORLD_NODE).world
         truth = {'phase_start_s': world.phase_start_s, 'events': dict(world.events),
                  'peak_time_s': world.peak_time_s}
     finally:

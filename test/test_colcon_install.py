@@ -15,6 +15,16 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
+from mantis_rig.contract import (
+    CAMERA_NODE,
+    FORCE_BLOCK,
+    JOINT_STATE,
+    LOADCELL_NODE,
+    MARKERS,
+    STAGE_NODE,
+    SUPERVISOR_NODE,
+    resolve,
+)
 from mantis_rig.recording import BagReader
 
 REPO = Path(__file__).resolve().parents[1]
@@ -82,7 +92,7 @@ def _clean_env() -> dict:
 def test_the_install_space_has_the_executables_the_index_and_the_share_files(install):
     prefix, _ = install
     lib = prefix / PACKAGE / 'lib' / PACKAGE
-    for node in ('stage_node', 'loadcell_node', 'camera_node', 'supervisor_node', 'sim_rig',
+    for node in (STAGE_NODE, LOADCELL_NODE, CAMERA_NODE, SUPERVISOR_NODE, 'sim_rig',
                  'replay_node', 'mantis'):
         assert os.access(lib / node, os.X_OK), node
     assert (prefix / PACKAGE / 'share' / 'ament_index' / 'resource_index' / 'packages' /
@@ -123,7 +133,7 @@ def test_a_trial_from_the_installed_executables(install, tmp_path):
     started = [
         subprocess.Popen([str(lib / 'sim_rig')], env=env, cwd=tmp_path, stdout=logs['rig'],
                          stderr=subprocess.STDOUT),
-        subprocess.Popen([str(lib / 'supervisor_node'), '--ros-args', '-p',
+        subprocess.Popen([str(lib / SUPERVISOR_NODE), '--ros-args', '-p',
                           'use_sim_time:=true', '-p', f'out:={trials}'], env=env, cwd=tmp_path,
                          stdout=logs['supervisor'], stderr=subprocess.STDOUT)]
     try:
@@ -153,7 +163,7 @@ def test_a_trial_from_the_installed_executables(install, tmp_path):
     reader = BagReader(bags[0])
     assert reader.complete
     assert reader.metadata('trial_outcome')['result'] == 'completed'
-    assert {'/loadcell/force_block', '/stage/joint_state', '/camera/markers'} <= set(
+    assert {resolve(FORCE_BLOCK), resolve(JOINT_STATE), resolve(MARKERS)} <= set(
         reader.topics)
 
 

@@ -23,6 +23,26 @@ from sensor_msgs.msg import JointState, TimeReference
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import Trigger
 
+from mantis_rig.contract import (
+    CAMERA_ARM,
+    CAMERA_NODE,
+    CAMERA_TRIGGER,
+    DIAGNOSTICS,
+    FORCE_BLOCK,
+    FORCE_CEILING_NAME,
+    JOINT_STATE,
+    LOADCELL_NODE,
+    MARKERS,
+    SIM_WORLD_NODE,
+    STAGE_HOME,
+    STAGE_NODE,
+    STAGE_STOP,
+    TARE,
+    TRIGGER_TIME,
+    VELOCITY_COMMAND,
+    WRENCH,
+    resolve,
+)
 from mantis_rig.hardware.interfaces import DeviceError
 from mantis_rig.hardware.world_port import WorldPort
 from mantis_rig.nodes.camera_node import CameraNode
@@ -67,15 +87,15 @@ class Rig:
         self.lock = threading.Lock()
         self.received = {}
         self.clients = {}
-        for topic, msg_type in (('/loadcell/force_block', Float64MultiArray),
-                                ('/loadcell/wrench', WrenchStamped),
-                                ('/camera/markers', Float64MultiArray),
-                                ('/camera/trigger_time', TimeReference),
-                                ('/stage/joint_state', JointState),
-                                ('/diagnostics', DiagnosticArray)):
+        for topic, msg_type in ((resolve(FORCE_BLOCK), Float64MultiArray),
+                                (resolve(WRENCH), WrenchStamped),
+                                (resolve(MARKERS), Float64MultiArray),
+                                (resolve(TRIGGER_TIME), TimeReference),
+                                (resolve(JOINT_STATE), JointState),
+                                (resolve(DIAGNOSTICS), DiagnosticArray)):
             self.received[topic] = []
             self.client.create_subscription(msg_type, topic, self._recorder(topic), 1000)
-        self.velocity = self.client.create_publisher(Float64, '/stage/velocity_command', 10)
+        self.velocity = self.client.create_publisher(Float64, resolve(VELOCITY_COMMAND), 10)
         self.spinners = [Spinner(self.executor, 'rig'), Spinner(client_executor, 'client')]
 
     def add(self, node):
@@ -135,7 +155,7 @@ class Rig:
             time.sleep(0.02)
 
     def diagnostics(self, name_prefix):
-        return [s for array in self.messages('/diagnostics') for s in array.status
+        return [s for array in self.messages(resolve(DIAGNOSTICS)) for s in array.status
                 if s.name.startswith(name_prefix)]
 
     def close(self):
@@ -178,7 +198,7 @@ def pull(rig, velocity_m_per_s=PULL_M_PER_S, attempts=10, wait_s=1.0):
         rig.velocity.publish(Float64(data=velocity_m_per_s))
         deadline = time.monotonic() + wait_s
         while time.monotonic() < deadline:
-            states = rig.messages('/stage/joint_state')
+            states = rig.messages(resolve(JOINT_STATE))
             if states and states[-1].velocity[0] > 0.0:
                 return
             time.sleep(0.01)
@@ -191,41 +211,42 @@ def trial():
     rig = Rig()
     try:
         rig.add_sim_rig({
-            'sim_world_node': {'real_time_factor': REAL_TIME_FACTOR},
-            'loadcell_node': {'scene': SCENE, 'seed': 3},
-            'stage_node': {'scene': SCENE},
-            'camera_node': {'scene': SCENE, 'frame_rate_hz': FRAME_RATE_HZ,
+            SIM_WORLD_NODE: {'real_time_factor': REAL_TIME_FACTOR},
+            LOADCELL_NODE: {'scene': SCENE, 'seed': 3},
+            STAGE_NODE: {'scene': SCENE},
+            CAMERA_NODE: {'scene': SCENE, 'frame_rate_hz': FRAME_RATE_HZ,
                             'pre_trigger_s': PRE_TRIGGER_S, 'post_trigger_s': POST_TRIGGER_S}})
-        for name in ('stage_node', 'loadcell_node', 'camera_node'):
+        for name in (STAGE_NODE, LOADCELL_NODE, CAMERA_NODE):
             assert rig.transition(name, Transition.TRANSITION_CONFIGURE), name
             assert rig.transition(name, Transition.TRANSITION_ACTIVATE), name
             assert rig.state(name) == 'active'
-        assert rig.call(Trigger, '/camera/arm').success
+        assert rig.call(Trigger, resolve(CAMERA_ARM)).success
         pull(rig)
         blocks = []
 
         def release_seen():
             with rig.lock:
-                new = rig.received['/loadcell/force_block'][len(blocks):]
+                new = rig.received[resolve(FORCE_BLOCK)][len(blocks):]
             blocks.extend(force_block_from_msg(m) for m in new)
             return len(blocks) >= 3 and released(blocks)
 
-        for name in ('/camera/trigger', '/stage/stop'):    # discovered before they are needed
+        # discovered before they are needed
+        for name in (resolve(CAMERA_TRIGGER), resolve(STAGE_STOP)):
             rig.clients[name] = rig.client.create_client(Trigger, name)
             assert rig.clients[name].wait_for_service(timeout_sec=TIMEOUT_S)
         rig.wait_for(release_seen, 'the release in the force stream')
         rig.velocity.publish(Float64(data=0.0))
-        trigger = rig.call(Trigger, '/camera/trigger')
-        stop = rig.call(Trigger, '/stage/stop')
-        rig.wait_for(lambda: rig.messages('/camera/markers'), 'marker frames')
-        rig.wait_for(lambda: rig.messages('/stage/joint_state')[-1].velocity[0] == 0.0,
+        trigger = rig.call(Trigger, resolve(CAMERA_TRIGGER))
+        stop = rig.call(Trigger, resolve(STAGE_STOP))
+        rig.wait_for(lambda: rig.messages(resolve(MARKERS)), 'marker frames')
+        rig.wait_for(lambda: rig.messages(resolve(JOINT_STATE))[-1].velocity[0] == 0.0,
                      'the stage to report a stop')
         # 1 Hz of wall time: a report in phase IV can come before the peak is found, so wait
         # for one that has both (the test below reads the last report)
         rig.wait_for(lambda: any(
             values.get('phase') == 'IV' and math.isfinite(float(values.get('peak_time_s', 'nan')))
             for values in ({kv.key: kv.value for kv in s.values}
-                           for s in rig.diagnostics('sim_world_node'))),
+                           for s in rig.diagnostics(SIM_WORLD_NODE))),
             'sim_world_node to report phase IV and the peak on /diagnostics')
         time.sleep(0.5)                      # the rest of the marker blocks, a few more samples
     finally:
@@ -235,7 +256,7 @@ def trial():
 
 def test_force_stream_rises_and_drops_at_the_release_without_gaps(trial):
     rig = trial['rig']
-    blocks = [force_block_from_msg(m) for m in rig.messages('/loadcell/force_block')]
+    blocks = [force_block_from_msg(m) for m in rig.messages(resolve(FORCE_BLOCK))]
     assert len(blocks) > 20
     for before, after in zip(blocks, blocks[1:]):
         assert after.period_s == before.period_s == round(1e9 / RATE_HZ) / 1e9
@@ -249,7 +270,7 @@ def test_force_stream_rises_and_drops_at_the_release_without_gaps(trial):
     peak = release - 40 + int(np.argmax(f[release - 40:release + 200]))
     assert 13.0 < f[peak] < 25.0                             # the unlatching spike
     assert f[peak:peak + 200].min() < f[peak] - 3.0          # and the drop after it (10 ms)
-    wrenches = rig.messages('/loadcell/wrench')
+    wrenches = rig.messages(resolve(WRENCH))
     assert len(wrenches) > 0.5 * (t[-1] - t[0]) * 200.0
     assert 7.0 < np.median([w.wrench.force.x for w in wrenches]) < 13.0
 
@@ -258,16 +279,16 @@ def test_camera_frames_cover_the_strike(trial):
     rig, trigger = trial['rig'], trial['trigger']
     assert trigger.success, trigger.message
     assert trial['stop'].success, trial['stop'].message
-    (stamp,) = rig.messages('/camera/trigger_time')
+    (stamp,) = rig.messages(resolve(TRIGGER_TIME))
     trigger_s = stamp.time_ref.sec + stamp.time_ref.nanosec * 1e-9
     assert stamp.header.stamp == stamp.time_ref            # sim: ROS time is the world's time
     assert stamp.source == 'camera'
-    frames = concatenate(marker_block_from_msg(m) for m in rig.messages('/camera/markers'))
+    frames = concatenate(marker_block_from_msg(m) for m in rig.messages(resolve(MARKERS)))
     assert set(frames.markers_m) == {'mb1', 'mb2', 'mb3', 'ma1', 'ma2'}
     assert frames.time_s[0] == pytest.approx(trigger_s - PRE_TRIGGER_S, abs=1e-3)
     assert frames.time_s[-1] == pytest.approx(trigger_s + POST_TRIGGER_S, abs=1e-3)
     assert len(frames) == pytest.approx((PRE_TRIGGER_S + POST_TRIGGER_S) * FRAME_RATE_HZ, abs=2)
-    blocks = [force_block_from_msg(m) for m in rig.messages('/loadcell/force_block')]
+    blocks = [force_block_from_msg(m) for m in rig.messages(resolve(FORCE_BLOCK))]
     f = np.concatenate([b.force_n for b in blocks])
     release_s = blocks[0].t0_s + release_index(f) / RATE_HZ
     assert frames.time_s[0] < release_s < frames.time_s[-1]
@@ -279,21 +300,21 @@ def test_camera_frames_cover_the_strike(trial):
 
 def test_stage_state_and_diagnostics_while_pulling(trial):
     rig = trial['rig']
-    states = rig.messages('/stage/joint_state')
+    states = rig.messages(resolve(JOINT_STATE))
     assert states and states[0].name == ['stage']
     positions = [s.position[0] for s in states]
     assert max(positions) > positions[0] + 0.2e-3
     assert max(s.velocity[0] for s in states) == pytest.approx(PULL_M_PER_S, rel=0.01)
     assert states[-1].velocity[0] == 0.0                     # stopped
     assert list(states[-1].effort) == [0.0]
-    for name in ('stage_node', 'loadcell_node', 'camera_node'):
+    for name in (STAGE_NODE, LOADCELL_NODE, CAMERA_NODE):
         statuses = rig.diagnostics(name)
         assert statuses, name
         assert all(s.level == DiagnosticStatus.OK for s in statuses), \
             [(s.name, s.message) for s in statuses if s.level != DiagnosticStatus.OK]
-    stage_values = [{kv.key: kv.value for kv in s.values} for s in rig.diagnostics('stage_node')]
+    stage_values = [{kv.key: kv.value for kv in s.values} for s in rig.diagnostics(STAGE_NODE)]
     assert any(v.get('homed') == 'true' for v in stage_values)
-    world = [{kv.key: kv.value for kv in s.values} for s in rig.diagnostics('sim_world_node')]
+    world = [{kv.key: kv.value for kv in s.values} for s in rig.diagnostics(SIM_WORLD_NODE)]
     assert world and world[-1]['phase'] == 'IV' and float(world[-1]['peak_time_s']) > 0
 
 
@@ -307,20 +328,20 @@ def test_force_ceiling_stops_the_stage():
     rig = Rig()
     try:
         sim_rig = rig.add_sim_rig({
-            'sim_world_node': {'real_time_factor': 5.0},
-            'stage_node': {'scene': SCENE, 'max_force_age_s': 5.0},
-            'loadcell_node': {'scene': SCENE, 'force_ceiling_n': 13.0}})
-        for name in ('stage_node', 'loadcell_node'):
+            SIM_WORLD_NODE: {'real_time_factor': 5.0},
+            STAGE_NODE: {'scene': SCENE, 'max_force_age_s': 5.0},
+            LOADCELL_NODE: {'scene': SCENE, FORCE_CEILING_NAME: 13.0}})
+        for name in (STAGE_NODE, LOADCELL_NODE):
             assert rig.transition(name, Transition.TRANSITION_CONFIGURE), name
             assert rig.transition(name, Transition.TRANSITION_ACTIVATE), name
         pull(rig)
-        errors = rig.wait_for(lambda: [s for s in rig.diagnostics('loadcell_node')
+        errors = rig.wait_for(lambda: [s for s in rig.diagnostics(LOADCELL_NODE)
                                        if s.level == DiagnosticStatus.ERROR], 'the ceiling')
         assert 'above the ceiling 13.000 N' in errors[0].message
         rig.wait_for(lambda: sim_rig.world.stage_velocity_m_per_s() == 0.0, 'the stage to stop',
                      30.0)
         assert sim_rig.world.events, 'the ceiling tripped before the release'
-        assert rig.state('stage_node') == 'active'
+        assert rig.state(STAGE_NODE) == 'active'
     finally:
         rig.close()
 
@@ -340,7 +361,7 @@ def test_invalid_parameters_are_refused_with_the_reason(rig):
     camera = rig.add(CameraNode(context=rig.context))
     cases = [
         (loadcell, 'sample_rate_hz', 5e6, 'out of range'),
-        (loadcell, 'force_ceiling_n', -1.0, 'out of range'),
+        (loadcell, FORCE_CEILING_NAME, -1.0, 'out of range'),
         (loadcell, 'channel', 'Dev1/xx', 'does not parse'),
         (loadcell, 'backend', 'simulated', "valid backends: sim, hardware"),
         (loadcell, 'scene', 'no_such_scene', 'unknown scene'),
@@ -354,7 +375,7 @@ def test_invalid_parameters_are_refused_with_the_reason(rig):
         assert not result.successful, (name, value)
         assert reason in result.reason, result.reason
         assert node.get_parameter(name).value == before
-    (ok,) = loadcell.set_parameters([Parameter('force_ceiling_n', value=20.0)])
+    (ok,) = loadcell.set_parameters([Parameter(FORCE_CEILING_NAME, value=20.0)])
     assert ok.successful
 
 
@@ -370,7 +391,7 @@ def configure_fails(rig, name):
 def test_unknown_backend_fails_configure_with_the_reason_on_diagnostics(rig):
     rig.add(StageNode(context=rig.context,
                       parameter_overrides=[Parameter('backend', value='simulator')]))
-    error = configure_fails(rig, 'stage_node')
+    error = configure_fails(rig, STAGE_NODE)
     assert "unknown backend 'simulator'" in error.message
     assert 'sim, hardware' in error.message
 
@@ -378,7 +399,7 @@ def test_unknown_backend_fails_configure_with_the_reason_on_diagnostics(rig):
 def test_a_simulated_device_alone_refuses_to_configure_and_names_the_rig(rig):
     """Outside the simulated rig there is no world for the sim backend to reach."""
     rig.add(LoadcellNode(context=rig.context, parameter_overrides=sim_overrides()))
-    error = configure_fails(rig, 'loadcell_node')
+    error = configure_fails(rig, LOADCELL_NODE)
     assert 'runs inside the simulated rig' in error.message
     assert 'ros2 run mantis_rig sim_rig' in error.message
 
@@ -420,16 +441,16 @@ class FailingWorld(WorldPort):
 def test_device_error_takes_the_node_through_its_error_state(rig):
     rig.add(LoadcellNode(context=rig.context, world_port=FailingWorld(),
                          parameter_overrides=sim_overrides()))
-    assert rig.transition('loadcell_node', Transition.TRANSITION_CONFIGURE)
-    assert rig.transition('loadcell_node', Transition.TRANSITION_ACTIVATE)
-    errors = rig.wait_for(lambda: [s for s in rig.diagnostics('loadcell_node')
+    assert rig.transition(LOADCELL_NODE, Transition.TRANSITION_CONFIGURE)
+    assert rig.transition(LOADCELL_NODE, Transition.TRANSITION_ACTIVATE)
+    errors = rig.wait_for(lambda: [s for s in rig.diagnostics(LOADCELL_NODE)
                                    if 'device released' in s.message], 'on_error', 30.0)
     assert errors[-1].level == DiagnosticStatus.ERROR
     assert 'simulated world link lost' in errors[-1].message
-    assert rig.state('loadcell_node') == 'unconfigured'
-    assert len(rig.messages('/loadcell/force_block')) == 5
+    assert rig.state(LOADCELL_NODE) == 'unconfigured'
+    assert len(rig.messages(resolve(FORCE_BLOCK))) == 5
     # it can be configured again
-    assert rig.transition('loadcell_node', Transition.TRANSITION_CONFIGURE)
+    assert rig.transition(LOADCELL_NODE, Transition.TRANSITION_CONFIGURE)
 
 
 def test_services_refuse_in_the_wrong_state(rig):
@@ -437,14 +458,14 @@ def test_services_refuse_in_the_wrong_state(rig):
                        parameter_overrides=sim_overrides()))
     rig.add(StageNode(context=rig.context, world_port=FailingWorld(),
                       parameter_overrides=sim_overrides()))
-    answer = rig.call(Trigger, '/camera/trigger')
+    answer = rig.call(Trigger, resolve(CAMERA_TRIGGER))
     assert not answer.success and 'unconfigured' in answer.message
-    assert rig.transition('camera_node', Transition.TRANSITION_CONFIGURE)
-    assert rig.transition('camera_node', Transition.TRANSITION_ACTIVATE)
-    answer = rig.call(Trigger, '/camera/trigger')
+    assert rig.transition(CAMERA_NODE, Transition.TRANSITION_CONFIGURE)
+    assert rig.transition(CAMERA_NODE, Transition.TRANSITION_ACTIVATE)
+    answer = rig.call(Trigger, resolve(CAMERA_TRIGGER))
     assert not answer.success and 'not armed' in answer.message
-    assert rig.transition('stage_node', Transition.TRANSITION_CONFIGURE)
-    answer = rig.call(Trigger, '/stage/home')
+    assert rig.transition(STAGE_NODE, Transition.TRANSITION_CONFIGURE)
+    answer = rig.call(Trigger, resolve(STAGE_HOME))
     assert not answer.success and 'inactive' in answer.message
     (result,) = rig.nodes[-1].set_parameters([Parameter('serial_port', value='/dev/ttyS3')])
     assert not result.successful and 'applied at configure' in result.reason
@@ -462,26 +483,26 @@ def test_hardware_stage_node_on_the_kdc101_emulator(rig):
         rig.add(StageNode(context=rig.context, parameter_overrides=[
             Parameter('backend', value='hardware'), Parameter('serial_port', value=emulator.port),
             Parameter('joint_state_rate_hz', value=20.0), Parameter('max_force_age_s', value=5.0)]))
-        assert rig.transition('stage_node', Transition.TRANSITION_CONFIGURE)
-        assert rig.transition('stage_node', Transition.TRANSITION_ACTIVATE)
-        rig.wait_for(lambda: rig.messages('/stage/joint_state'), 'a joint state', 30.0)
-        assert rig.messages('/stage/joint_state')[-1].position[0] == pytest.approx(5e-3, abs=1e-5)
-        home = rig.call(Trigger, '/stage/home')
+        assert rig.transition(STAGE_NODE, Transition.TRANSITION_CONFIGURE)
+        assert rig.transition(STAGE_NODE, Transition.TRANSITION_ACTIVATE)
+        rig.wait_for(lambda: rig.messages(resolve(JOINT_STATE)), 'a joint state', 30.0)
+        assert rig.messages(resolve(JOINT_STATE))[-1].position[0] == pytest.approx(5e-3, abs=1e-5)
+        home = rig.call(Trigger, resolve(STAGE_HOME))
         assert home.success, home.message
         rig.velocity.publish(Float64(data=5e-3))                 # above the 2.4 mm/s ceiling
-        refused = rig.wait_for(lambda: [s for s in rig.diagnostics('stage_node')
+        refused = rig.wait_for(lambda: [s for s in rig.diagnostics(STAGE_NODE)
                                         if s.level == DiagnosticStatus.WARN], 'a refusal', 30.0)
         assert 'exceeds the ceiling' in refused[-1].message
         # the driver-level force guard: no force reading, no pull
         rig.velocity.publish(Float64(data=2e-3))
-        refused = rig.wait_for(lambda: [s for s in rig.diagnostics('stage_node')
+        refused = rig.wait_for(lambda: [s for s in rig.diagnostics(STAGE_NODE)
                                         if 'force reading' in s.message], 'a blind pull refused',
                                30.0)
         assert refused[-1].level == DiagnosticStatus.WARN
         time.sleep(0.5)
-        assert abs(rig.messages('/stage/joint_state')[-1].position[0]) < 0.05e-3   # homed at 0
+        assert abs(rig.messages(resolve(JOINT_STATE))[-1].position[0]) < 0.05e-3   # homed at 0
         # with the load cell's stream below the ceiling the stage pulls
-        forces = rig.client.create_publisher(Float64MultiArray, '/loadcell/force_block', 100)
+        forces = rig.client.create_publisher(Float64MultiArray, resolve(FORCE_BLOCK), 100)
         feeding = threading.Event()
 
         def feed(newtons):
@@ -492,32 +513,32 @@ def test_hardware_stage_node_on_the_kdc101_emulator(rig):
         feeder.start()
         time.sleep(0.3)
         rig.velocity.publish(Float64(data=2e-3))
-        rig.wait_for(lambda: rig.messages('/stage/joint_state')[-1].position[0] > 0.2e-3,
+        rig.wait_for(lambda: rig.messages(resolve(JOINT_STATE))[-1].position[0] > 0.2e-3,
                      'the stage to move', 30.0)
         # a block over the ceiling (30 N) stops it, in the driver layer: an ERROR, latched; the
         # stage stays open and active, and refuses to pull until it is activated again
         feeding.set()
         feeder.join()
         forces.publish(force_block_to_msg(time.time(), 50e-6, np.full(200, 31.0)))
-        tripped = rig.wait_for(lambda: [s for s in rig.diagnostics('stage_node')
+        tripped = rig.wait_for(lambda: [s for s in rig.diagnostics(STAGE_NODE)
                                         if 'above the ceiling' in s.message], 'the trip', 30.0)
         assert tripped[-1].level == DiagnosticStatus.ERROR
         rig.wait_for(lambda: not emulator.moving, 'the stage to stop', 30.0)
-        assert rig.state('stage_node') == 'active'
+        assert rig.state(STAGE_NODE) == 'active'
         forces.publish(force_block_to_msg(time.time(), 50e-6, np.full(200, 5.0)))
         rig.velocity.publish(Float64(data=2e-3))
-        rig.wait_for(lambda: [s for s in rig.diagnostics('stage_node')
+        rig.wait_for(lambda: [s for s in rig.diagnostics(STAGE_NODE)
                               if s.level == DiagnosticStatus.WARN and 'refused' in s.message
                               and 'ceiling' in s.message], 'the latched guard to refuse', 30.0)
         assert not emulator.moving
-        assert rig.transition('stage_node', Transition.TRANSITION_DEACTIVATE)
-        assert rig.transition('stage_node', Transition.TRANSITION_ACTIVATE)     # trip cleared
-        released_before = len(device_released(rig, 'stage_node'))
+        assert rig.transition(STAGE_NODE, Transition.TRANSITION_DEACTIVATE)
+        assert rig.transition(STAGE_NODE, Transition.TRANSITION_ACTIVATE)     # trip cleared
+        released_before = len(device_released(rig, STAGE_NODE))
         emulator.vanish()                                        # the USB cable is pulled
-        rig.wait_for(lambda: len(device_released(rig, 'stage_node')) > released_before, 'on_error',
+        rig.wait_for(lambda: len(device_released(rig, STAGE_NODE)) > released_before, 'on_error',
                      30.0)
-        assert device_released(rig, 'stage_node')[-1].level == DiagnosticStatus.ERROR
-        rig.wait_for(lambda: rig.state('stage_node') == 'unconfigured', 'unconfigured', 30.0)
+        assert device_released(rig, STAGE_NODE)[-1].level == DiagnosticStatus.ERROR
+        rig.wait_for(lambda: rig.state(STAGE_NODE) == 'unconfigured', 'unconfigured', 30.0)
     finally:
         emulator.close()
 
@@ -536,20 +557,20 @@ def test_hardware_loadcell_node_on_the_fake_daq(rig, monkeypatch):
     system = FakeDaqSystem(signal_v=paced_signal).install(monkeypatch)
     rig.add(LoadcellNode(context=rig.context, parameter_overrides=[
         Parameter('backend', value='hardware'), Parameter('block_size', value=1000)]))
-    assert rig.transition('loadcell_node', Transition.TRANSITION_CONFIGURE)
-    assert rig.transition('loadcell_node', Transition.TRANSITION_ACTIVATE)
-    rig.wait_for(lambda: len(rig.messages('/loadcell/force_block')) >= 5, 'force blocks', 30.0)
-    tare = rig.call(Trigger, '/loadcell/tare')
+    assert rig.transition(LOADCELL_NODE, Transition.TRANSITION_CONFIGURE)
+    assert rig.transition(LOADCELL_NODE, Transition.TRANSITION_ACTIVATE)
+    rig.wait_for(lambda: len(rig.messages(resolve(FORCE_BLOCK))) >= 5, 'force blocks', 30.0)
+    tare = rig.call(Trigger, resolve(TARE))
     assert tare.success and 'restarted' in tare.message, tare.message
     rig.wait_for(lambda: force_block_from_msg(
-        rig.messages('/loadcell/force_block')[-1]).force_n.max() < 0.01, 'a tared force', 30.0)
-    blocks = [force_block_from_msg(m) for m in rig.messages('/loadcell/force_block')]
+        rig.messages(resolve(FORCE_BLOCK))[-1]).force_n.max() < 0.01, 'a tared force', 30.0)
+    blocks = [force_block_from_msg(m) for m in rig.messages(resolve(FORCE_BLOCK))]
     assert blocks[0].force_n == pytest.approx(0.5 * 11.12)
     assert abs(blocks[0].t0_s - time.time()) < 60.0      # ROS (wall) time, not monotonic
     # epoch seconds in a float64 resolve ~0.24 us (recording/force_block.py)
     assert abs(blocks[1].t0_s - blocks[0].t0_s - 1000 * blocks[0].period_s) < 1e-6
     system.remove_device()
-    errors = rig.wait_for(lambda: [s for s in rig.diagnostics('loadcell_node')
+    errors = rig.wait_for(lambda: [s for s in rig.diagnostics(LOADCELL_NODE)
                                    if 'device released' in s.message], 'on_error', 30.0)
     assert errors[-1].level == DiagnosticStatus.ERROR
-    assert rig.state('loadcell_node') == 'unconfigured'
+    assert rig.state(LOADCELL_NODE) == 'unconfigured'

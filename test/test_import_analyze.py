@@ -15,6 +15,7 @@ from mantis_rig.analysis import TrackFormatError, analyze_tracks, load_tracks
 from mantis_rig.analysis.bag_input import read_trial_bag
 from mantis_rig.analysis.tracking_import import ANGLES_TOPIC
 from mantis_rig.cli import main
+from mantis_rig.contract import FORCE_BLOCK, MARKERS, resolve
 from mantis_rig.recording import BagReader, BagWriter
 from mantis_rig.recording.force_block import force_block_to_msg
 from mantis_rig.recording.marker_block import (
@@ -70,8 +71,8 @@ def test_imported_bag_holds_markers_angles_and_source(imported_bag, csv_analysis
     assert conditions['source_file'] == str(DATA) and conditions['source_format'] == 'csv'
     assert int(conditions['frames']) == N_FRAMES
     counts = {t: i.message_count for t, i in reader.topics.items()}
-    assert counts == {'/camera/markers': 66, ANGLES_TOPIC: N_FRAMES}
-    blocks = [marker_block_from_msg(m) for _, _, _, m in reader.messages(['/camera/markers'])]
+    assert counts == {resolve(MARKERS): 66, ANGLES_TOPIC: N_FRAMES}
+    blocks = [marker_block_from_msg(m) for _, _, _, m in reader.messages([resolve(MARKERS)])]
     time_s = np.concatenate([b.time_s for b in blocks])
     np.testing.assert_array_equal(time_s, tracks.time_s)
     for name, xy_mm in tracks.markers_mm.items():  # metres in the bag
@@ -153,7 +154,7 @@ def test_corrupted_chunk_is_reported_and_the_data_before_it_analysed(imported_ba
     mcap = next(bad.glob('*.mcap'))
     with open(mcap, 'rb') as f:
         summary = make_reader(f).get_summary()
-    markers = next(i for i, c in summary.channels.items() if c.topic == '/camera/markers')
+    markers = next(i for i, c in summary.channels.items() if c.topic == resolve(MARKERS))
     chunks = sorted((c for c in summary.chunk_indexes if markers in c.message_index_offsets),
                     key=lambda c: c.message_start_time)
     chunk = chunks[int(len(chunks) * 0.9)]  # a chunk with marker frames, after the strike
@@ -175,9 +176,9 @@ def bag_with_force(path, tracks, newtons_scale=1.0):
     with BagWriter(path, sync_period_s=0) as bag:
         frames = MarkerFrames(tracks.time_s, {n: xy / 1e3 for n, xy in tracks.markers_mm.items()})
         for i, msg in enumerate(marker_blocks_to_msgs(frames)):
-            bag.write('/camera/markers', msg, int(t_ns[min((i + 1) * 1000, len(t_ns)) - 1]))
+            bag.write(resolve(MARKERS), msg, int(t_ns[min((i + 1) * 1000, len(t_ns)) - 1]))
         for start in range(0, len(force), block):
-            bag.write('/loadcell/force_block', force_block_to_msg(
+            bag.write(resolve(FORCE_BLOCK), force_block_to_msg(
                 start * period_ns / 1e9, period_ns / 1e9, force[start:start + block]),
                 (start + block) * period_ns)
     return force

@@ -13,6 +13,7 @@ import pytest
 
 from mantis_rig.cli import build_parser
 from mantis_rig.cli.trial import stack_config
+from mantis_rig.contract import STAGE_NODE
 from mantis_rig.nodes import sim_world_node
 from mantis_rig.nodes.device_node import COMMON_PARAMETERS
 from mantis_rig.nodes.node_table import BY_NAME, DEVICES, SIM_RIG_PROCESS, SUPERVISOR, WORLD
@@ -33,7 +34,9 @@ def launch_free_part() -> dict:
     and run: nothing else of the file is executed."""
     wanted = []
     for node in launch_tree().body:
-        if isinstance(node, ast.FunctionDef) and node.name in LAUNCH_FREE:
+        if isinstance(node, ast.ImportFrom) and node.module.startswith('mantis_rig'):
+            wanted.append(node)          # the contract's names
+        elif isinstance(node, ast.FunctionDef) and node.name in LAUNCH_FREE:
             wanted.append(node)
         elif isinstance(node, ast.Assign) and any(
                 isinstance(t, ast.Name) and t.id in LAUNCH_FREE for t in node.targets):
@@ -145,7 +148,7 @@ def test_every_parameter_passed_is_declared_by_its_node(launch_file, backend):
 
 def test_the_check_finds_an_undeclared_parameter(launch_file):
     params = launched_parameters(launch_file, 'sim')
-    params['stage_node']['pull_speed_mm_s'] = 2.0        # a supervisor parameter
+    params[STAGE_NODE]['pull_speed_mm_s'] = 2.0        # a supervisor parameter
     params['no_such_node'] = {}
     assert undeclared(params) == ['stage_node: pull_speed_mm_s',
                                   'no_such_node: not a node of the node table']

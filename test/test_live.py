@@ -21,13 +21,14 @@ import pytest
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
+from mantis_rig.contract import FORCE_BLOCK, JOINT_STATE, resolve
 from mantis_rig.recording import BagReader
 from mantis_rig.recording.force_block import force_block_from_msg
 
 REPO = Path(__file__).resolve().parents[1]
 SUBPROTOCOL = 'foxglove.sdk.v1'
 MESSAGE_DATA = 0x01
-WANTED = ('/loadcell/force_block', '/stage/joint_state')
+WANTED = (resolve(FORCE_BLOCK), resolve(JOINT_STATE))
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -109,8 +110,8 @@ def test_a_client_sees_the_trial_live_and_a_stalled_one_does_not_slow_it(tmp_pat
     for topic in WANTED:
         channel = channels[topic]
         assert channel['encoding'] == 'cdr' and channel['schemaEncoding'] == 'ros2msg'
-    assert channels['/loadcell/force_block']['schemaName'] == 'std_msgs/msg/Float64MultiArray'
-    assert 'MSG: std_msgs/MultiArrayLayout' in channels['/loadcell/force_block']['schema']
+    assert channels[resolve(FORCE_BLOCK)]['schemaName'] == 'std_msgs/msg/Float64MultiArray'
+    assert 'MSG: std_msgs/MultiArrayLayout' in channels[resolve(FORCE_BLOCK)]['schema']
 
     factory = DecoderFactory()
     decoders = {t: factory.decoder_for('cdr', Schema(id=c['id'], name=c['schemaName'],
@@ -121,7 +122,7 @@ def test_a_client_sees_the_trial_live_and_a_stalled_one_does_not_slow_it(tmp_pat
     live_stage = {}
     for channel, payload in received:
         message = decoders[channel['topic']](payload)
-        if channel['topic'] == '/loadcell/force_block':
+        if channel['topic'] == resolve(FORCE_BLOCK):
             live_force[tuple(message.data[:2])] = list(message.data)
         else:
             stamp = (message.header.stamp.sec, message.header.stamp.nanosec)
@@ -131,7 +132,7 @@ def test_a_client_sees_the_trial_live_and_a_stalled_one_does_not_slow_it(tmp_pat
     reader_bag = BagReader(bag)
     bag_force, bag_stage = {}, {}
     for topic, _, _, msg in reader_bag.messages(list(WANTED)):
-        if topic == '/loadcell/force_block':
+        if topic == resolve(FORCE_BLOCK):
             bag_force[tuple(msg.data[:2])] = list(msg.data)
         else:
             bag_stage[(msg.header.stamp.sec, msg.header.stamp.nanosec)] = (
@@ -167,7 +168,7 @@ def test_a_client_sees_the_trial_live_and_a_stalled_one_does_not_slow_it(tmp_pat
         assert decoded == sum(s.message_count for s in [summary.statistics])
 
     blocks = sorted((force_block_from_msg(m) for t, _, _, m in
-                     reader_bag.messages(['/loadcell/force_block'])), key=lambda b: b.t0_s)
+                     reader_bag.messages([resolve(FORCE_BLOCK)])), key=lambda b: b.t0_s)
     for before, after in zip(blocks, blocks[1:]):
         assert after.t0_s == pytest.approx(before.t0_s + before.force_n.size * before.period_s,
                                            abs=1e-6)

@@ -20,6 +20,7 @@ from std_msgs.msg import String
 import yaml
 
 from mantis_rig.cli import main as cli_main
+from mantis_rig.contract import CAMERA_TRIGGER, DIAGNOSTICS, resolve
 from mantis_rig.recording import (
     BagClosedError,
     BagError,
@@ -40,8 +41,8 @@ TYPES = {
     '/force': 'std_msgs/msg/Float64MultiArray',
     '/joint_states': 'sensor_msgs/msg/JointState',
     '/wrench': 'geometry_msgs/msg/WrenchStamped',
-    '/camera/trigger': 'sensor_msgs/msg/TimeReference',
-    '/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray',
+    resolve(CAMERA_TRIGGER): 'sensor_msgs/msg/TimeReference',
+    resolve(DIAGNOSTICS): 'diagnostic_msgs/msg/DiagnosticArray',
     '/events': 'std_msgs/msg/String',
 }
 N_PER_TOPIC = 40
@@ -70,11 +71,11 @@ def make_message(topic, i):
         msg.wrench.force.z = 0.25 * i
         msg.wrench.torque.x = -1.0 / (i + 1)
         return msg
-    if topic == '/camera/trigger':
+    if topic == resolve(CAMERA_TRIGGER):
         msg = TimeReference(source='phantom_v7_3')
         msg.time_ref.sec, msg.time_ref.nanosec = sec, nanosec
         return msg
-    if topic == '/diagnostics':
+    if topic == resolve(DIAGNOSTICS):
         status = DiagnosticStatus(level=DiagnosticStatus.WARN, name='stage', message=f'm{i}',
                                   hardware_id='kdc101',
                                   values=[KeyValue(key='pos_mm', value=str(i / 7))])

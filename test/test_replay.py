@@ -18,6 +18,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from rosgraph_msgs.msg import Clock
 
+from mantis_rig.contract import CLOCK, JOINT_STATE, MARKERS, SUPERVISOR_STATE, resolve
 from mantis_rig.recording import BagReader, BagWriter
 from mantis_rig.recording.interfaces import message_class
 from mantis_rig.recording.qos import parse_offered_qos_string
@@ -199,7 +200,8 @@ def test_replay_node_plays_bag_from_parameters(trial_bag, ros_context):
              '-p', 'topics:=[/supervisor/state,/camera/markers]'],
             cwd=REPO, env=os.environ.copy(), capture_output=True, text=True, timeout=120)
         assert result.returncode == 0, result.stderr
-        wanted = [(t, d) for t, d, _ in original if t in ('/supervisor/state', '/camera/markers')]
+        wanted = [(t, d) for t, d, _ in original
+                  if t in (resolve(SUPERVISOR_STATE), resolve(MARKERS))]
         assert recorder.wait_for(len(wanted)), result.stderr
         time.sleep(0.2)
     finally:
@@ -211,11 +213,11 @@ def test_replay_node_plays_bag_from_parameters(trial_bag, ros_context):
 
 def test_replay_rate_and_clock(trial_bag, ros_context):
     clock_qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT)
-    recorder = Recorder(ros_context, trial_bag, extra=[(Clock, '/clock', clock_qos)])
+    recorder = Recorder(ros_context, trial_bag, extra=[(Clock, resolve(CLOCK), clock_qos)])
     node = rclpy.create_node('player', context=ros_context)
     try:
         player = BagPlayer(node, trial_bag, rate=4.0, clock_hz=50.0,
-                           topics=['/stage/joint_state', '/supervisor/state'])
+                           topics=[resolve(JOINT_STATE), resolve(SUPERVISOR_STATE)])
         assert player.wait_for_subscribers(20.0)
         report = player.run()
         player.wait_for_delivery(2.0)
@@ -224,7 +226,7 @@ def test_replay_rate_and_clock(trial_bag, ros_context):
         node.destroy_node()
         recorder.close()
     stats = report.stats
-    assert report.published == {'/stage/joint_state': 200, '/supervisor/state': 5}
+    assert report.published == {resolve(JOINT_STATE): 200, resolve(SUPERVISOR_STATE): 5}
     assert stats.achieved_rate == pytest.approx(4.0, rel=0.01)
     # player and recorder share this process's GIL here: only the typical lateness is tight
     assert np.median(stats.lateness_s) < 1e-3
@@ -233,7 +235,7 @@ def test_replay_rate_and_clock(trial_bag, ros_context):
     last_ns = max(t for topic, _, t in original if topic in report.published)
     # /clock: 50 Hz of wall time = every 80 ms of log time at rate 4, never ahead of the data
     ticks = [deserialize_message(d, Clock).clock for t, d, _, _ in
-             recorder.received if t == '/clock']
+             recorder.received if t == resolve(CLOCK)]
     tick_ns = [c.sec * 1_000_000_000 + c.nanosec for c in ticks]
     assert report.clock_ticks == len(range(first_ns, last_ns + 1, 80_000_000))
     assert len(tick_ns) >= 0.9 * report.clock_ticks  # best effort
@@ -280,7 +282,7 @@ def test_missing_bag_gives_error_exit(tmp_path):
 
 def test_nothing_to_replay_is_an_error(tmp_path):
     with BagWriter(tmp_path / 'empty', sync_period_s=0) as bag:
-        bag.add_topic('/supervisor/state', 'std_msgs/msg/String')
+        bag.add_topic(resolve(SUPERVISOR_STATE), 'std_msgs/msg/String')
     result = run_cli('replay', tmp_path / 'empty')
     assert result.returncode == 1, result.stdout + result.stderr
     assert 'nothing was replayed from' in result.stderr
@@ -315,7 +317,7 @@ def test_replay_qos_from_offered_profiles():
     assert replay_qos('/f', []).reliability == ReliabilityPolicy.RELIABLE
     q = replay_qos('/latched', [latched])
     assert (q.durability, q.depth) == (DurabilityPolicy.TRANSIENT_LOCAL, 1)
-    assert replay_qos('/supervisor/state', [reliable]).durability == \
+    assert replay_qos(resolve(SUPERVISOR_STATE), [reliable]).durability == \
         DurabilityPolicy.TRANSIENT_LOCAL
     assert replay_qos('/f', [reliable]).depth >= 100  # bursts are not cut by keep-last
 

@@ -22,6 +22,14 @@ import time
 import pytest
 import rclpy
 
+from mantis_rig.contract import (
+    JOINT_STATE,
+    SIM_WORLD_NODE,
+    SUPERVISOR_NODE,
+    SUPERVISOR_STATE,
+    VELOCITY_COMMAND,
+    resolve,
+)
 from mantis_rig.nodes.bringup import Stack, StackConfig
 from mantis_rig.nodes.trial_client import TrialClient
 from mantis_rig.recording import BagReader, TruncatedBagWarning
@@ -132,13 +140,13 @@ def check_stopped_bag(bag: Path, reason: str) -> None:
     outcome = reader.metadata('trial_outcome')
     assert outcome['result'] == 'aborted'
     assert outcome['reason'] == reason
-    commands = list(reader.messages(['/stage/velocity_command']))
+    commands = list(reader.messages([resolve(VELOCITY_COMMAND)]))
     assert commands and commands[-1].message.data == 0.0
     stop_s = commands[-1].log_time_ns * 1e-9
-    late = [m.message.velocity[0] for m in reader.messages(['/stage/joint_state'])
+    late = [m.message.velocity[0] for m in reader.messages([resolve(JOINT_STATE)])
             if m.log_time_ns * 1e-9 > stop_s + STAGE_STOPS_WITHIN_S]
     assert all(v == 0.0 for v in late), f'the stage still moved after the stop: {late[:5]}'
-    states = [m.message.data for m in reader.messages(['/supervisor/state'])]
+    states = [m.message.data for m in reader.messages([resolve(SUPERVISOR_STATE)])]
     assert states[-1] == 'aborted'
 
 
@@ -237,10 +245,10 @@ def test_a_full_disk_mid_pull_stops_the_stage_and_keeps_what_was_written(tmp_pat
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
         monkeypatch.setattr(writer_module._AppendOnlyFile, 'write', disk_full)
         final = client.wait_for_end(60.0)
-        sequence = stack.node('supervisor_node').sequence
+        sequence = stack.node(SUPERVISOR_NODE).sequence
         assert sequence.finished.wait(30.0)     # 'aborted' is published before the log closes
         reason = sequence.outcome['reason']
-        world = stack.node('sim_world_node').world
+        world = stack.node(SIM_WORLD_NODE).world
         deadline = time.monotonic() + 10.0
         while world.stage_velocity_m_per_s() != 0.0 and time.monotonic() < deadline:
             time.sleep(0.01)
@@ -258,7 +266,7 @@ def test_a_full_disk_mid_pull_stops_the_stage_and_keeps_what_was_written(tmp_pat
         reader = BagReader(bag)
         messages = list(reader.messages())
     assert len(messages) >= int(match[1]) > 0
-    assert 'pulling' in [m.message.data for m in messages if m.topic == '/supervisor/state']
+    assert 'pulling' in [m.message.data for m in messages if m.topic == resolve(SUPERVISOR_STATE)]
 
 
 def test_mantis_trial_exits_1_with_one_line_when_the_log_cannot_be_written(trial):

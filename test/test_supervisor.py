@@ -6,6 +6,14 @@ import time
 import numpy as np
 import pytest
 
+from mantis_rig.contract import (
+    CAMERA_NODE,
+    FORCE_CEILING_NAME,
+    LOADCELL_NODE,
+    STAGE_NODE,
+    SUPERVISOR_STATE,
+    resolve,
+)
 from mantis_rig.trial.conditions import ConditionError, TrialConditions, check_value
 from mantis_rig.trial.force_monitor import ForceMonitor
 from mantis_rig.trial.sequence import DEVICE_NODES, Pending, TrialSequence
@@ -222,8 +230,8 @@ def test_force_ceiling_aborts_and_stops_the_stage():
 def test_the_trials_force_ceiling_is_set_on_every_guard_before_it_is_configured():
     rig, _, outcome = run_trial(force_ceiling_n=12.5)
     assert outcome['result'] == 'aborted'
-    assert rig.parameters == {'stage_node': [({'force_ceiling_n': 12.5}, 'unconfigured')],
-                              'loadcell_node': [({'force_ceiling_n': 12.5}, 'unconfigured')]}
+    assert rig.parameters == {STAGE_NODE: [({FORCE_CEILING_NAME: 12.5}, 'unconfigured')],
+                              LOADCELL_NODE: [({FORCE_CEILING_NAME: 12.5}, 'unconfigured')]}
 
 
 def test_without_the_supervisors_monitor_the_ceiling_is_left_to_the_guards():
@@ -242,7 +250,7 @@ def test_device_fault_and_operator_abort():
         def watch():
             while seq.state != 'pulling':
                 time.sleep(0.001)
-            seq.on_device_fault('loadcell_node', 'DAQ overrun')
+            seq.on_device_fault(LOADCELL_NODE, 'DAQ overrun')
         threading.Thread(target=watch, daemon=True).start()
     rig, seq, outcome = run_trial(before=fault_when_pulling)
     assert outcome['reason'] == 'device fault: loadcell_node: DAQ overrun'
@@ -264,10 +272,10 @@ def test_device_fault_and_operator_abort():
 
 def test_failed_bring_up_names_the_device_and_its_reason():
     rig = FakeRig()
-    rig.refuse['camera_node', 'configure'] = 'transition refused'
+    rig.refuse[CAMERA_NODE, 'configure'] = 'transition refused'
 
     def diagnose(rig, seq):
-        seq.on_device_message('camera_node', "unknown backend 'warp'")
+        seq.on_device_message(CAMERA_NODE, "unknown backend 'warp'")
     _, _, outcome = run_trial(rig, before=diagnose)
     assert outcome['result'] == 'aborted'
     assert outcome['reason'] == ("camera_node configure failed: transition refused "
@@ -292,7 +300,7 @@ class LossyRig(FakeRig):
 
     def change_state(self, node, transition):
         answer = super().change_state(node, transition)
-        if (node, transition) == ('stage_node', 'configure') and 'configure' not in self.lost:
+        if (node, transition) == (STAGE_NODE, 'configure') and 'configure' not in self.lost:
             self.lost.add('configure')
             return Pending()
         return answer
@@ -305,7 +313,7 @@ def test_lost_lifecycle_replies_are_recovered_by_asking_again(monkeypatch):
     assert outcome['result'] == 'completed', outcome
     assert set(rig.lifecycle.values()) == {'active'}
     # a second query for each node, and one more for stage_node's unanswered configure
-    assert rig.queries == {'stage_node': 3, 'loadcell_node': 2, 'camera_node': 2}
+    assert rig.queries == {STAGE_NODE: 3, LOADCELL_NODE: 2, CAMERA_NODE: 2}
 
 
 def test_an_abort_closes_the_log_once_the_stage_reports_rest():
@@ -335,7 +343,7 @@ class RefusingStageRig(FakeRig):
     def move_at(self, v):
         self.velocity_commands.append(v)
         if len(self.velocity_commands) <= self.refusals:
-            self.seq.on_device_message('stage_node', 'velocity move refused: no force '
+            self.seq.on_device_message(STAGE_NODE, 'velocity move refused: no force '
                                        'reading yet')
             return
         super().move_at(v)
@@ -423,7 +431,7 @@ def test_supervisor_refuses_bad_input_with_the_reason(ros, tmp_path, monkeypatch
     assert outcome['reason'] == ('stage_node get_state failed: service /stage_node/get_state '
                                  'is not available')
     assert bag.metadata('trial_conditions')['operator_note'] == 'no devices'
-    states = [m.message.data for m in bag.messages(['/supervisor/state'])]
+    states = [m.message.data for m in bag.messages([resolve(SUPERVISOR_STATE)])]
     assert states[-2:] == ['configuring', 'aborted']
 
 

@@ -30,6 +30,20 @@ import rclpy
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.typesys import Stores, get_typestore
 
+from mantis_rig.contract import (
+    FORCE_BLOCK,
+    FORCE_CEILING_NAME,
+    JOINT_STATE,
+    MARKERS,
+    SET_PARAMETERS,
+    SIM_WORLD_NODE,
+    STAGE_NODE,
+    SUPERVISOR_NODE,
+    SUPERVISOR_STATE,
+    VELOCITY_COMMAND,
+    node_interface,
+    resolve,
+)
 from mantis_rig.nodes.bringup import Stack, StackConfig
 from mantis_rig.nodes.recorder import TRIAL_TOPICS
 from mantis_rig.nodes.trial_client import TrialClient
@@ -42,7 +56,7 @@ SCENE = 'air_23mm'
 RTF = float(os.environ.get('MANTIS_TEST_RTF', '1.0'))
 FAST = 0.0      # real-time factor 0: as fast as the stack keeps up (what is not about pacing)
 TRIAL_TIMEOUT_S = 240.0
-FAST_RETURN = {'stage_node': {'move_speed_m_per_s': 2.0e-3}}
+FAST_RETURN = {STAGE_NODE: {'move_speed_m_per_s': 2.0e-3}}
 
 pytestmark = pytest.mark.timeout(600)
 
@@ -74,7 +88,8 @@ def wait_for(client, state, mark=0, timeout=TRIAL_TIMEOUT_S):
 
 def set_parameter(client, name, value):
     """Set one supervisor parameter over ROS; (successful, reason)."""
-    service = client.create_client(SetParameters, '/supervisor_node/set_parameters')
+    service = client.create_client(
+        SetParameters, resolve(node_interface(SUPERVISOR_NODE, SET_PARAMETERS)))
     assert service.wait_for_service(timeout_sec=30)
     request = SetParameters.Request(parameters=[ParameterMsg(name=name, value=ParameterValue(
         type=ParameterType.PARAMETER_DOUBLE, double_value=value))])
@@ -112,7 +127,7 @@ def check_rosbags_decodes_everything(bag):
 
 def marker_frames(bag):
     return concatenate(sorted((marker_block_from_msg(m.message) for m in
-                               BagReader(bag).messages(['/camera/markers'])),
+                               BagReader(bag).messages([resolve(MARKERS)])),
                               key=lambda f: f.time_s[0]))
 
 
@@ -131,11 +146,11 @@ def check_completed_trial(bag, peak_time_s=None):
     assert summary.conditions['operator_note'] == 'pytest'
     # every topic of the contract, each with messages
     for spec in TRIAL_TOPICS:
-        assert summary.topic_counts.get(spec.topic, 0) > 0, (spec.topic, summary.topic_counts)
+        assert summary.topic_counts.get(resolve(spec), 0) > 0, (spec, summary.topic_counts)
     # the full-rate force stream: no gap, rate x duration samples within one block
     assert summary.force_gaps == []
     block = max(m.message.layout.dim[0].size
-                for m in BagReader(bag).messages(['/loadcell/force_block']))
+                for m in BagReader(bag).messages([resolve(FORCE_BLOCK)]))
     assert summary.force_rate_hz == pytest.approx(20_000.0)
     assert abs(summary.force_samples - summary.force_rate_hz * summary.force_duration_s) <= block
     # the stream covers the trial from before the pull to after the stop
@@ -148,7 +163,7 @@ def check_completed_trial(bag, peak_time_s=None):
     assert summary.release_caught
     assert summary.peak_force_n > 12.0
     # the stage went back to where the pull started
-    states = [m.message for m in BagReader(bag).messages(['/stage/joint_state'])]
+    states = [m.message for m in BagReader(bag).messages([resolve(JOINT_STATE)])]
     pull_s = summary.state_time('pulling')
     start = next(s.position[0] for s in states
                  if s.header.stamp.sec + s.header.stamp.nanosec * 1e-9 >= pull_s)
@@ -175,11 +190,11 @@ def test_air_23mm_trial_in_one_process(ros, tmp_path):
             client.states[-1] != 'pulling'
         ok, reason = set_parameter(client, 'pull_speed_mm_s', 50.0)
         assert not ok and 'pull_speed_mm_s' in reason, reason
-        ok, reason = set_parameter(client, 'force_ceiling_n', 20.0)
+        ok, reason = set_parameter(client, FORCE_CEILING_NAME, 20.0)
         assert not ok and 'a trial is in progress' in reason, reason
         wait_for(client, 'done', mark)
         wait_closed(bag)
-        world = stack.node('sim_world_node').world
+        world = stack.node(SIM_WORLD_NODE).world
         peak_time_s = world.peak_time_s
         assert client.call('abort') == (False, 'no trial in progress (state done)')
     finally:
@@ -239,7 +254,7 @@ def test_force_ceiling_below_the_peak_aborts(ros, tmp_path):
         bag = bag_of(message)
         wait_closed(bag)
         time.sleep(0.5)                     # let the stage report standing still
-        stage = stack.node('sim_world_node').world.stage_velocity_m_per_s()
+        stage = stack.node(SIM_WORLD_NODE).world.stage_velocity_m_per_s()
     finally:
         stack.stop()
         client.destroy_node()
@@ -252,11 +267,11 @@ def test_force_ceiling_below_the_peak_aborts(ros, tmp_path):
     assert re.search(r'(> 13\.0 N|above the ceiling 13(\.000)? N)', outcome['reason']), \
         outcome['reason']
     assert outcome['stage_stopped'] == 'true'
-    commands = [m.message.data for m in reader.messages(['/stage/velocity_command'])]
+    commands = [m.message.data for m in reader.messages([resolve(VELOCITY_COMMAND)])]
     assert commands[-1] == 0.0
-    states = [m.message for m in reader.messages(['/stage/joint_state'])]
+    states = [m.message for m in reader.messages([resolve(JOINT_STATE)])]
     assert states[-1].velocity[0] == 0.0
-    assert 'returning' not in [m.message.data for m in reader.messages(['/supervisor/state'])]
+    assert 'returning' not in [m.message.data for m in reader.messages([resolve(SUPERVISOR_STATE)])]
     check_rosbags_decodes_everything(bag)
 
 
@@ -269,8 +284,8 @@ def test_supervisor_killed_mid_trial_leaves_a_readable_bag(ros, tmp_path):
         bag = bag_of(message)
         wait_for(client, 'pulling', mark)
         time.sleep(1.0)                     # > the writer's 0.5 s sync period
-        stack.processes['supervisor_node'].kill()
-        stack.processes['supervisor_node'].wait()
+        stack.processes[SUPERVISOR_NODE].kill()
+        stack.processes[SUPERVISOR_NODE].wait()
     finally:
         stack.stop()
         client.destroy_node()
@@ -278,8 +293,8 @@ def test_supervisor_killed_mid_trial_leaves_a_readable_bag(ros, tmp_path):
     with warnings.catch_warnings(record=True):
         warnings.simplefilter('always', TruncatedBagWarning)
         reader = BagReader(bag)
-        states = [m.message.data for m in reader.messages(['/supervisor/state'])]
-        blocks = list(reader.messages(['/loadcell/force_block']))
+        states = [m.message.data for m in reader.messages([resolve(SUPERVISOR_STATE)])]
+        blocks = list(reader.messages([resolve(FORCE_BLOCK)]))
     assert not reader.complete and reader.problems
     assert reader.metadata('trial_conditions')['operator_note'] == 'pytest'
     assert 'pulling' in states and len(blocks) > 10
@@ -317,5 +332,5 @@ def test_one_force_ceiling_reaches_the_stages_own_guard(tmp_path):
     assert match, guard[0]
     assert 12.0 < float(match[1]) < 30.0
     assert outcome['stage_stopped'] == 'true'
-    commands = [m.message.data for m in reader.messages(['/stage/velocity_command'])]
+    commands = [m.message.data for m in reader.messages([resolve(VELOCITY_COMMAND)])]
     assert commands[-1] == 0.0

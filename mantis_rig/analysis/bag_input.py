@@ -1,10 +1,12 @@
 """Read a trial bag into analysis inputs: MarkerTracks (mm) and the tendon force samples.
 
-The marker frames come from ``/camera/markers`` (marker blocks, metres, camera frame; see
-:mod:`mantis_rig.recording.marker_block`), converted to millimetres here (the one conversion
-between the bag and the analysis), the force from ``/loadcell/force_block`` (force blocks, see
-:mod:`mantis_rig.recording.force_block`). Both carry times on the trial's clock, so the force is
-used for the tendon's work only where its time span overlaps the frames'.
+The marker frames come from the contract's ``camera/markers`` (marker blocks, metres, camera
+frame; see :mod:`mantis_rig.recording.marker_block`), converted to millimetres here (the one
+conversion between the bag and the analysis), the force from ``loadcell/force_block`` (force
+blocks, see :mod:`mantis_rig.recording.force_block`), each in the namespace the bag was
+recorded in (``/camera/markers``, or ``/rig2/camera/markers`` for a rig under ``/rig2``).
+Both carry times on the trial's clock, so the force is used for the tendon's work only where
+its time span overlaps the frames'.
 
 The camera frame's orientation is the bag's: ``trial_conditions`` ``handedness`` ('left', the
 tracker's and the simulated camera's convention, where the bag states none) and ``tilt_deg``
@@ -24,14 +26,13 @@ import warnings
 
 import numpy as np
 
+from ..contract import FORCE_BLOCK, MARKERS, bag_namespace, resolve
 from ..recording import BagError, BagReader, TruncatedBagWarning
 from ..recording.force_block import force_block_from_msg
 from ..recording.marker_block import concatenate, marker_block_from_msg
 from .tracking import load_tracks
 from .tracks import HANDEDNESS, MarkerTracks, TrackFormatError
 
-MARKERS_TOPIC = '/camera/markers'
-FORCE_TOPIC = '/loadcell/force_block'
 _MM_PER_M = 1000.0
 
 
@@ -90,12 +91,14 @@ def read_trial_bag(path) -> TrialInput:
     TrackFormatError if the bag holds no usable marker frames (the message names why).
     """
     reader = BagReader(path, warn=False)
+    namespace = bag_namespace(reader.topics)
+    markers_topic, force_topic = resolve(MARKERS, namespace), resolve(FORCE_BLOCK, namespace)
     marker_blocks, force_blocks = [], []
     with warnings.catch_warnings():  # damage found while reading lands in reader.problems
         warnings.simplefilter('ignore', TruncatedBagWarning)
-        for topic, _, log_time_ns, msg in reader.messages([MARKERS_TOPIC, FORCE_TOPIC]):
+        for topic, _, log_time_ns, msg in reader.messages([markers_topic, force_topic]):
             try:
-                if topic == MARKERS_TOPIC:
+                if topic == markers_topic:
                     marker_blocks.append(marker_block_from_msg(msg))
                 else:
                     force_blocks.append(force_block_from_msg(msg))
@@ -104,17 +107,17 @@ def read_trial_bag(path) -> TrialInput:
                                f'{log_time_ns * 1e-9:.6f} s: {exc}') from exc
     problems = list(reader.problems)
     if not marker_blocks:
-        has = MARKERS_TOPIC in reader.topics
+        has = markers_topic in reader.topics
         why = 'no complete message before the damage' if has and problems else \
             'no messages' if has else 'no such topic'
         raise TrackFormatError(
-            f'{path}: no marker frames on {MARKERS_TOPIC} ({why}; topics: '
+            f'{path}: no marker frames on {markers_topic} ({why}; topics: '
             f'{sorted(reader.topics)})' + (f'; bag problems: {"; ".join(problems)}'
                                            if problems else ''))
     try:
         frames = concatenate(marker_blocks)
     except (ValueError, IndexError) as exc:
-        raise BagError(f'{path}: the marker blocks on {MARKERS_TOPIC} do not fit together: '
+        raise BagError(f'{path}: the marker blocks on {markers_topic} do not fit together: '
                        f'{exc}') from exc
     order = np.argsort(frames.time_s, kind='stable')
     time_s = frames.time_s[order]
@@ -123,7 +126,7 @@ def read_trial_bag(path) -> TrialInput:
         time_s=time_s, frames=_frame_numbers(time_s),
         markers_mm={name: xy[order] * _MM_PER_M for name, xy in frames.markers_m.items()},
         **_camera_frame(conditions, path),
-        source={'path': str(path), 'format': 'bag', 'topic': MARKERS_TOPIC, **conditions})
+        source={'path': str(path), 'format': 'bag', 'topic': markers_topic, **conditions})
     tracks.validate()
     force_t, force = _force_samples(force_blocks, time_s)
     return TrialInput(tracks=tracks, force_time_s=force_t, force_N=force, problems=problems,

@@ -28,13 +28,14 @@ import numpy as np
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 
+from ..contract import JOINT_ANGLES, MARKERS, resolve
 from ..recording import TRIAL_CONDITIONS, BagWriter
 from ..recording.marker_block import FRAMES_PER_BLOCK, marker_block_to_msg
-from .bag_input import MARKERS_TOPIC
 from .report import TrialAnalysis
 from .tracking import MarkerTracks
 
-ANGLES_TOPIC = '/analysis/joint_angles'
+MARKERS_TOPIC = resolve(MARKERS)          # an imported trial's bag: the root namespace
+ANGLES_TOPIC = resolve(JOINT_ANGLES)
 ANGLE_NAMES = ['theta1', 'theta3']
 FIT_RECORD = 'tracking_fit'
 _M_PER_MM = 1e-3

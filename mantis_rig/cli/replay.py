@@ -24,11 +24,12 @@ def run_replay(args) -> int:
                            'priority')
     from rclpy.signals import SignalHandlerOptions
 
+    from ..contract import REPLAY_NODE
     from ..nodes.lean_node import LeanNode
     from ..nodes.stopping import StopRequested, StopSignals
     signals = StopSignals('mantis replay').install()    # 130 / 143, not rclpy's handler
     rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO)
-    node = LeanNode('mantis_replay')
+    node = LeanNode(REPLAY_NODE)
     stop = threading.Event()
     relay = None
     try:

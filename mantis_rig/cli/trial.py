@@ -7,6 +7,7 @@ from pathlib import Path
 import sys
 import time
 
+from ..contract import SUPERVISOR_NODE
 from ..trial.conditions import (
     BACKENDS,
     PARAMETERS,
@@ -264,7 +265,7 @@ def _name_a_dying_process(stack) -> None:
 
 def _supervisor_bag(stack) -> Path | None:
     try:
-        return stack.node('supervisor_node').bag_path
+        return stack.node(SUPERVISOR_NODE).bag_path
     except StopIteration:
         return None
 

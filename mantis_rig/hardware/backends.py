@@ -11,6 +11,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Optional
 
+from mantis_rig.contract import (  # the parameters' defaults
+    BACKENDS,
+    DEFAULT_SERIAL_PORT,
+    DEFAULT_TRIGGER_OUTPUT,
+)
 from mantis_sim.scene import Scene, load_scene
 
 from .interfaces import (
@@ -26,10 +31,6 @@ from .sim_camera import SimCameraTrigger
 from .sim_force import SimForceDaq
 from .sim_stage import SimStage
 from .world_port import WorldPort
-
-BACKENDS = ('sim', 'hardware')
-DEFAULT_SERIAL_PORT = '/dev/ttyUSB0'
-DEFAULT_TRIGGER_OUTPUT = 'Dev1/port0/line0'
 
 
 def check_backend(backend: str) -> str:

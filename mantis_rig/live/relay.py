@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from mantis_sim.errors import InputError
 
+from ..contract import LIVE_RELAY_NODE, resolve
 from ..nodes.executors import Spinner, light_executor
 from ..nodes.recorder import TRIAL_TOPICS, subscription_qos
 from ..recording.interfaces import message_class
@@ -43,7 +44,10 @@ class LiveRelay:
     """The server and a node whose raw subscriptions feed it, spun by a SingleThreadedExecutor
     in a thread of its own. Start it before the trial: a bad address is refused then."""
 
-    def __init__(self, address: str, ros_context=None, topics=TRIAL_TOPICS, name='mantis_rig'):
+    def __init__(self, address: str, ros_context=None, topics=TRIAL_TOPICS, name='mantis_rig',
+                 namespace: str = '/'):
+        """topics: contract Topics, relayed from the rig in ``namespace``; each channel is
+        named by the topic's full name there."""
         import foxglove
 
         from ..nodes.lean_node import LeanNode
@@ -56,11 +60,13 @@ class LiveRelay:
         # that came straight back was refused ("attempted to subscribe to unknown channel"),
         # and that client never got the topic (foxglove-sdk 0.30).
         self.channels = {}
+        full_names = {spec.name: resolve(spec.name, namespace) for spec in topics}
         for spec in topics:
             schema = foxglove.Schema(name=spec.type_name, encoding=SCHEMA_ENCODING,
                                      data=full_message_definition(spec.type_name).encode())
-            self.channels[spec.topic] = foxglove.Channel(
-                spec.topic, schema=schema, message_encoding='cdr', context=self._foxglove)
+            self.channels[full_names[spec.name]] = foxglove.Channel(
+                full_names[spec.name], schema=schema, message_encoding='cdr',
+                context=self._foxglove)
         try:
             self.server = foxglove.start_server(
                 name=name, host=host, port=port, context=self._foxglove,
@@ -69,12 +75,13 @@ class LiveRelay:
             raise LiveError(f'--live {address}: cannot serve on {host}:{port}: '
                             f'{str(exc).removeprefix("FoxgloveError: ")}') from None
         self.host, self.port = host, self.server.port
-        self.node = LeanNode('mantis_live', context=ros_context, start_parameter_services=False)
-        self.relayed = {spec.topic: 0 for spec in topics}      # messages passed on, per topic
+        self.node = LeanNode(LIVE_RELAY_NODE, namespace=namespace, context=ros_context,
+                             start_parameter_services=False)
+        self.relayed = dict.fromkeys(full_names.values(), 0)  # messages passed on, per topic
         for spec in topics:
-            channel = self.channels[spec.topic]
-            self.node.create_subscription(message_class(spec.type_name), spec.topic,
-                                          self._relay(spec.topic, channel),
+            full = full_names[spec.name]
+            self.node.create_subscription(message_class(spec.type_name), spec.name,
+                                          self._relay(full, self.channels[full]),
                                           subscription_qos(spec), raw=True)
         executor = light_executor(ros_context)
         executor.add_node(self.node)

@@ -32,7 +32,7 @@ import time
 from rclpy.parameter import Parameter
 import yaml
 
-from mantis_rig.trial.safety_limits import FORCE_CEILING_NAME, FORCE_GUARD_NODES
+from mantis_rig.contract import CLOCK, FORCE_CEILING_NAME, FORCE_GUARD_NODES, resolve
 
 from .executors import STACK_PARENT_ENV, Spinner, light_executor, threaded_executor
 from .node_table import DEVICES, SIM_RIG_PROCESS, STAGE_NODE, SUPERVISOR, WORLD
@@ -49,6 +49,7 @@ class StackConfig:
     processes: str = 'single'
     supervisor: dict = field(default_factory=dict)          # supervisor parameter overrides
     devices: dict = field(default_factory=dict)             # node name -> parameter overrides
+    namespace: str = ''     # the rig's ROS namespace ('': none, i.e. '/'); e.g. '/rig2'
 
     @property
     def sim(self) -> bool:
@@ -77,6 +78,24 @@ class StackConfig:
         if self.sim:
             params[SUPERVISOR.name]['use_sim_time'] = True
         return params
+
+    @property
+    def node_namespace(self) -> str | None:
+        """The namespace the nodes are created in (None: the process's own)."""
+        return '/' + self.namespace.strip('/') if self.namespace.strip('/') else None
+
+    def params_file_key(self, name: str) -> str:
+        """A node's section in the params file: its fully qualified name in a namespace."""
+        return f'{self.node_namespace}/{name}' if self.node_namespace else name
+
+    def ros_arguments(self) -> list:
+        """What each node process gets beside its params file: in a namespace, the namespace,
+        and rclpy's time source (which subscribes to the absolute /clock) remapped to the
+        rig's own clock topic."""
+        if self.node_namespace is None:
+            return []
+        return ['-r', f'__ns:={self.node_namespace}',
+                '-r', f'{resolve(CLOCK)}:={CLOCK.name}']
 
     def node_names(self) -> list:
         return list(self.node_parameters())
@@ -135,15 +154,17 @@ class Stack:
                 # the simulated devices read the world directly, and every node's sim time is
                 # set by the world, not by /clock subscriptions
                 supervisor_params.pop('use_sim_time', None)
-                self.rig = SimRig(params)
+                self.rig = SimRig(params, namespace=self.config.node_namespace)
                 self.rig.add_to(self.executor, self.device_executor)
             else:
                 for entry in DEVICES:
                     self._add(entry.node_class()(
-                        node_name=entry.name, parameter_overrides=_overrides(params[entry.name])),
+                        node_name=entry.name, namespace=self.config.node_namespace,
+                        parameter_overrides=_overrides(params[entry.name])),
                         self.device_executor)
             supervisor = SUPERVISOR.node_class()(
-                node_name=SUPERVISOR.name, parameter_overrides=_overrides(supervisor_params))
+                node_name=SUPERVISOR.name, namespace=self.config.node_namespace,
+                parameter_overrides=_overrides(supervisor_params))
             if self.rig is not None:
                 self.rig.clock.attach(supervisor)
             self._add(supervisor, self.executor)
@@ -160,7 +181,7 @@ class Stack:
         return next(n for n in (*rig_nodes, *self.nodes) if n.get_name() == name)
 
     def _start_processes(self) -> None:
-        params = {name: {'ros__parameters': values}
+        params = {self.config.params_file_key(name): {'ros__parameters': values}
                   for name, values in self.config.node_parameters().items()}
         handle, path = tempfile.mkstemp(prefix='mantis_stack_', suffix='.yaml')
         with os.fdopen(handle, 'w') as f:
@@ -176,7 +197,7 @@ class Stack:
 
     def command(self, name: str) -> list:
         return [sys.executable, '-m', f'mantis_rig.nodes.{name}', '--ros-args',
-                '--params-file', str(self._params_file)]
+                '--params-file', str(self._params_file), *self.config.ros_arguments()]
 
     def _log(self, name: str):
         if self.log_dir is None:

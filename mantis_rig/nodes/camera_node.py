@@ -17,40 +17,30 @@ from sensor_msgs.msg import TimeReference
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
+from mantis_rig import contract
 from mantis_rig.hardware import backends
 from mantis_rig.hardware.interfaces import CameraConfig, ConfigurationError, DeviceError
-from mantis_rig.hardware.nidaq import parse_trigger_output
-from mantis_rig.nodes.device_node import DeviceNode, Param, time_msg
+from mantis_rig.nodes.device_node import DeviceNode, time_msg
 from mantis_rig.nodes.executors import run_node
 from mantis_rig.recording.marker_block import MarkerFrames, marker_blocks_to_msgs
 
 FRAMES_TIMEOUT_S = 60.0
 
 
-def _check_lines(name: str) -> None:
-    parse_trigger_output(name)
-
-
 class CameraNode(DeviceNode):
     DEVICE = 'camera'
-    PARAMETERS = (
-        Param('frame_rate_hz', 19_000.0, 'frame rate, frames/s (read at arm)', (1.0, 37_000.0),
-              at_configure=False),
-        Param('pre_trigger_s', 0.05, 'recorded time before the trigger, s (read at arm)',
-              (0.0, 1.0), at_configure=False),
-        Param('post_trigger_s', 0.05, 'recorded time after the trigger, s (read at arm)',
-              (0.0, 1.0), at_configure=False),
-        Param('lines', backends.DEFAULT_TRIGGER_OUTPUT, 'hardware: trigger output, a DO line '
-              '(Dev1/port0/line0) or a counter (Dev1/ctr0)', check=_check_lines),
-    )
+    PARAMETERS = contract.CAMERA_PARAMETERS
 
-    def __init__(self, node_name: str = 'camera_node', **kwargs):
+    def __init__(self, node_name: str = contract.CAMERA_NODE, **kwargs):
         super().__init__(node_name, **kwargs)
-        self._time_pub = self.create_publisher(TimeReference, '/camera/trigger_time', 10)
-        self._markers_pub = self.create_publisher(Float64MultiArray, '/camera/markers', 10)
-        self.create_service(Trigger, '/camera/arm', self._on_arm,
+        c = contract
+        self._time_pub = self.create_publisher(TimeReference, c.TRIGGER_TIME.name,
+                                               c.TRIGGER_TIME.qos.publisher())
+        self._markers_pub = self.create_publisher(Float64MultiArray, c.MARKERS.name,
+                                                  c.MARKERS.qos.publisher())
+        self.create_service(Trigger, c.CAMERA_ARM.name, self._on_arm,
                             callback_group=self.services_group)
-        self.create_service(Trigger, '/camera/trigger', self._on_trigger,
+        self.create_service(Trigger, c.CAMERA_TRIGGER.name, self._on_trigger,
                             callback_group=self.services_group)
         self._fetch: threading.Thread | None = None
         self._triggers = 0

@@ -21,8 +21,6 @@ world and its clock.
 """
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
 import threading
 import time
 from typing import Optional
@@ -42,28 +40,19 @@ from rclpy.lifecycle import Node as LifecycleNode
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.parameter import Parameter
 
-from mantis_rig.hardware.backends import BACKENDS, check_backend
+from mantis_rig import contract
+from mantis_rig.contract import DEVICE_COMMON_PARAMETERS, ParamSpec
+from mantis_rig.hardware.backends import check_backend
 from mantis_rig.hardware.interfaces import DeviceError
 
 from .lean_node import WithoutDefaultEventHandlers
 
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
-DEFAULT_SCENE = 'air_23mm_rig'
 SUCCESS = TransitionCallbackReturn.SUCCESS
 FAILURE = TransitionCallbackReturn.FAILURE
 
 
-@dataclass(frozen=True)
-class Param:
-    name: str
-    default: object
-    description: str
-    range: Optional[tuple] = None            # (low, high), inclusive
-    at_configure: bool = True                # applied at configure: no change while configured
-    check: Optional[Callable] = None         # raises ValueError with the reason
-
-
-def declare(node, spec: Param):
+def declare(node, spec: ParamSpec):
     descriptor = ParameterDescriptor(description=spec.description)
     if spec.range is not None:
         low, high = spec.range
@@ -85,25 +74,8 @@ def param_value(node, name: str):
     return [] if value is None else value
 
 
-def check_scene(name: str) -> None:
-    from mantis_sim.scene import load_scene
-    load_scene(name)
-
-
-def check_overrides(items) -> None:
-    for item in items or []:
-        if item and '=' not in item:
-            raise ValueError(f'override {item!r} is not key=value')
-
-
-COMMON_PARAMETERS = (
-    Param('backend', 'sim', f'device backend: {" or ".join(BACKENDS)}', check=check_backend),
-    Param('scene', DEFAULT_SCENE, 'sim: scene whose sensor models the simulated device uses '
-          '(the same scene as sim_world_node)', check=check_scene),
-    Param('set', [], 'sim: scene overrides, key=value each (as given to sim_world_node)',
-          check=check_overrides),
-    Param('seed', 0, 'sim: random seed of the sensor noise', (0, 2**31 - 1)),
-)
+#: the parameters every device node has (mantis_rig.contract)
+COMMON_PARAMETERS = DEVICE_COMMON_PARAMETERS
 
 
 def time_msg(t_s: float) -> Time:
@@ -135,7 +107,8 @@ class DeviceNode(WithoutDefaultEventHandlers, LifecycleNode):
         self._fault_signal = self.create_guard_condition(self._on_fault_signal)
         self._diag_lock = threading.Lock()
         self._level, self._message = OK, 'unconfigured'
-        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._diag_pub = self.create_publisher(DiagnosticArray, contract.DIAGNOSTICS.name,
+                                                contract.DIAGNOSTICS.qos.publisher())
         self.create_timer(1.0, self.publish_diagnostics,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
 

@@ -28,6 +28,7 @@ from rclpy.executors import (
 from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
+from mantis_rig.contract import side_node_name
 from mantis_rig.nodes.ros_env import claim_local_domain
 
 from .lean_node import LeanNode
@@ -100,7 +101,8 @@ class SideNode:
     and destroys the node."""
 
     def __init__(self, owner, suffix: str):
-        self.node = LeanNode(f'{owner.get_name()}_{suffix}', context=owner.context,
+        self.node = LeanNode(side_node_name(owner.get_name(), suffix),
+                             namespace=owner.get_namespace(), context=owner.context,
                              start_parameter_services=False)
         executor = EventsExecutor(context=owner.context)
         executor.add_node(self.node)

@@ -19,46 +19,31 @@ import numpy as np
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import Trigger
 
+from mantis_rig import contract
+from mantis_rig.contract import FORCE_CEILING_NAME
 from mantis_rig.hardware import backends
 from mantis_rig.hardware.interfaces import DaqConfig, DeviceError
-from mantis_rig.hardware.nidaq import parse_ai_channel
-from mantis_rig.nodes.device_node import ERROR, WARN, DeviceNode, Param, time_msg
+from mantis_rig.nodes.device_node import ERROR, WARN, DeviceNode, time_msg
 from mantis_rig.nodes.executors import run_node
 from mantis_rig.recording.force_block import force_block_to_msg
-from mantis_rig.trial.safety_limits import (
-    FORCE_CEILING_DEFAULT_N,
-    FORCE_CEILING_DESCRIPTION,
-    FORCE_CEILING_NAME,
-    FORCE_CEILING_RANGE_N,
-)
-
-
-def _check_channel(name: str) -> None:
-    parse_ai_channel(name)
 
 
 class LoadcellNode(DeviceNode):
     DEVICE = 'load cell'
-    PARAMETERS = (
-        Param('channel', 'Dev1/ai0', 'hardware: analog input channel', check=_check_channel),
-        Param('sample_rate_hz', 20_000.0, 'sample rate, Hz', (1.0, 2e6)),
-        Param('block_size', 200, 'samples per /loadcell/force_block message', (1, 1_000_000)),
-        Param('newtons_per_volt', 11.12, 'amplifier scale, N/V (IAA100: 10 V at 111 N)',
-              (1e-6, 1e6)),
-        Param(FORCE_CEILING_NAME, FORCE_CEILING_DEFAULT_N, 'the load cell\'s monitor: '
-              + FORCE_CEILING_DESCRIPTION, FORCE_CEILING_RANGE_N, at_configure=False),
-        Param('wrench_rate_hz', 200.0, '/loadcell/wrench rate, Hz', (0.1, 10_000.0),
-              at_configure=False),
-    )
+    PARAMETERS = contract.LOADCELL_PARAMETERS
 
-    def __init__(self, node_name: str = 'loadcell_node', **kwargs):
+    def __init__(self, node_name: str = contract.LOADCELL_NODE, **kwargs):
         super().__init__(node_name, **kwargs)
-        self._block_pub = self.create_publisher(Float64MultiArray, '/loadcell/force_block', 100)
-        self._wrench_pub = self.create_publisher(WrenchStamped, '/loadcell/wrench', 100)
-        self._stage_velocity_pub = self.create_publisher(Float64, '/stage/velocity_command', 10)
-        self._stage_stop = self.create_client(Trigger, '/stage/stop',
+        c = contract
+        self._block_pub = self.create_publisher(Float64MultiArray, c.FORCE_BLOCK.name,
+                                                c.FORCE_BLOCK.qos.publisher())
+        self._wrench_pub = self.create_publisher(WrenchStamped, c.WRENCH.name,
+                                                 c.WRENCH.qos.publisher())
+        self._stage_velocity_pub = self.create_publisher(Float64, c.VELOCITY_COMMAND.name,
+                                                         c.VELOCITY_COMMAND.qos.publisher())
+        self._stage_stop = self.create_client(Trigger, c.STAGE_STOP.name,
                                               callback_group=self.services_group)
-        self.create_service(Trigger, '/loadcell/tare', self._on_tare,
+        self.create_service(Trigger, c.TARE.name, self._on_tare,
                             callback_group=self.services_group)
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -175,7 +160,7 @@ class LoadcellNode(DeviceNode):
             self._wrench_pub.publish(msg)
 
     def _check_ceiling(self, t0_s, period_s, forces) -> None:
-        ceiling = self.param('force_ceiling_n')
+        ceiling = self.param(FORCE_CEILING_NAME)
         i = int(np.argmax(forces))
         if forces[i] <= ceiling:
             self._over_ceiling = False

@@ -1,6 +1,7 @@
 """The rig's node table: every node of the stack, its module and class, and what it is. Both
 the simulated rig in one process (sim_rig) and the stack's bring-up (bringup: one process, or
-one per node) build from this one table, and the launch file is checked against it.
+one per node) build from this one table, and the launch file is checked against it. The names
+are the contract's (mantis_rig.contract).
 
 Each node's module is ``mantis_rig.nodes.<name>``, run as ``python -m`` or as the console
 script of the same name (setup.py)."""
@@ -8,6 +9,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import importlib
+
+from mantis_rig import contract
 
 
 @dataclass(frozen=True)
@@ -22,17 +25,18 @@ class NodeEntry:
 
 
 NODES = (
-    NodeEntry('sim_world_node', 'SimWorldNode', 'world'),
-    NodeEntry('stage_node', 'StageNode', 'device'),
-    NodeEntry('loadcell_node', 'LoadcellNode', 'device'),
-    NodeEntry('camera_node', 'CameraNode', 'device'),
-    NodeEntry('supervisor_node', 'SupervisorNode', 'supervisor'),
+    NodeEntry(contract.SIM_WORLD_NODE, 'SimWorldNode', 'world'),
+    NodeEntry(contract.STAGE_NODE, 'StageNode', 'device'),
+    NodeEntry(contract.LOADCELL_NODE, 'LoadcellNode', 'device'),
+    NodeEntry(contract.CAMERA_NODE, 'CameraNode', 'device'),
+    NodeEntry(contract.SUPERVISOR_NODE, 'SupervisorNode', 'supervisor'),
 )
 BY_NAME = {entry.name: entry for entry in NODES}
 WORLD = next(entry for entry in NODES if entry.role == 'world')
 DEVICES = tuple(entry for entry in NODES if entry.role == 'device')
 SUPERVISOR = next(entry for entry in NODES if entry.role == 'supervisor')
 #: the process that holds the world and the device nodes in sim mode (nodes.sim_rig)
-SIM_RIG_PROCESS = 'sim_rig'
+SIM_RIG_PROCESS = contract.SIM_RIG_PROCESS
 #: the device node that drives the stage (stopped first in an emergency)
-STAGE_NODE = 'stage_node'
+STAGE_NODE = contract.STAGE_NODE
+assert tuple(entry.name for entry in DEVICES) == contract.DEVICE_NODES

@@ -16,6 +16,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from mantis_rig.contract import REPLAY_NODE_EXECUTABLE
 from mantis_rig.nodes.ros_env import claim_local_domain
 from mantis_rig.replay import BagPlayer, ReplayError
 
@@ -24,7 +25,7 @@ from .lean_node import WithoutDefaultEventHandlers
 
 class ReplayNode(WithoutDefaultEventHandlers, Node):
     def __init__(self):
-        super().__init__('replay_node')
+        super().__init__(REPLAY_NODE_EXECUTABLE)
         self.declare_parameter('bag', '')
         self.declare_parameter('rate', 1.0)
         self.declare_parameter('loop', False)

@@ -14,11 +14,11 @@ from rcl_interfaces.srv import SetParameters
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
-from mantis_rig.trial.sequence import DEVICE_NODES, Pending
+from mantis_rig import contract
+from mantis_rig.contract import DEVICE_NODES
+from mantis_rig.trial.sequence import Pending
 
-from .recorder import RELIABLE
-
-TRIGGER_SERVICES = ('stage/home', 'stage/stop', 'loadcell/tare', 'camera/arm', 'camera/trigger')
+TRIGGER_SERVICES = tuple(service.name for service in contract.DEVICE_SERVICES)
 TRANSITIONS = {'configure': Transition.TRANSITION_CONFIGURE,
                'activate': Transition.TRANSITION_ACTIVATE}
 SERVICE_WAIT_S = 10.0
@@ -29,16 +29,20 @@ class RigClient:
         self.node = node
         self._publish_state = publish_state or (lambda state, reason: None)
         group = {'callback_group': callback_group}
-        self._triggers = {name: node.create_client(Trigger, '/' + name, **group)
+        c = contract
+        self._triggers = {name: node.create_client(Trigger, name, **group)
                           for name in TRIGGER_SERVICES}
-        self._get_state = {n: node.create_client(GetState, f'/{n}/get_state', **group)
-                           for n in DEVICE_NODES}
-        self._change_state = {n: node.create_client(ChangeState, f'/{n}/change_state', **group)
-                              for n in DEVICE_NODES}
-        self._set_parameters = {n: node.create_client(SetParameters, f'/{n}/set_parameters',
-                                                      **group) for n in DEVICE_NODES}
-        self._velocity = node.create_publisher(Float64, '/stage/velocity_command', RELIABLE)
-        self._position = node.create_publisher(Float64, '/stage/position_command', RELIABLE)
+        self._get_state = {n: node.create_client(
+            GetState, c.node_interface(n, c.GET_STATE), **group) for n in DEVICE_NODES}
+        self._change_state = {n: node.create_client(
+            ChangeState, c.node_interface(n, c.CHANGE_STATE), **group) for n in DEVICE_NODES}
+        self._set_parameters = {n: node.create_client(
+            SetParameters, c.node_interface(n, c.SET_PARAMETERS), **group)
+            for n in DEVICE_NODES}
+        self._velocity = node.create_publisher(Float64, c.VELOCITY_COMMAND.name,
+                                               c.VELOCITY_COMMAND.qos.publisher())
+        self._position = node.create_publisher(Float64, c.POSITION_COMMAND.name,
+                                               c.POSITION_COMMAND.qos.publisher())
 
     # ------------------------------------------------------------------ RigPort
     def now_s(self) -> float:
@@ -62,9 +66,8 @@ class RigClient:
                              lambda r: (r.success, r.message), wait)
 
     def set_camera(self, frame_rate_hz, pre_trigger_s, post_trigger_s) -> Pending:
-        return self.set_parameters('camera_node', {'frame_rate_hz': frame_rate_hz,
-                                                   'pre_trigger_s': pre_trigger_s,
-                                                   'post_trigger_s': post_trigger_s})
+        return self.set_parameters(contract.CAMERA_NODE, dict(zip(
+            contract.CAMERA_WINDOW_PARAMETERS, (frame_rate_hz, pre_trigger_s, post_trigger_s))))
 
     def set_parameters(self, node_name: str, values: dict) -> Pending:
         """Set float parameters of a device node; (all set, the refusals' reasons)."""
@@ -87,19 +90,24 @@ class RigClient:
 
     def stop_stage(self) -> None:
         self.move_at(0.0)
-        self.call('stage/stop', wait=False)
+        self.call(contract.STAGE_STOP.name, wait=False)
 
     # ------------------------------------------------------------------ plumbing
+    def _full_name(self, client) -> str:
+        """The service's name in the rig's namespace (its client holds the contract's)."""
+        return self.node.resolve_service_name(client.srv_name)
+
     def _request(self, client, request, answer, wait: bool = True) -> Pending:
         if not client.service_is_ready() and not (
                 wait and client.wait_for_service(timeout_sec=SERVICE_WAIT_S)):
-            return Pending((False, f'service {client.srv_name} is not available'), done=True)
+            return Pending((False, f'service {self._full_name(client)} is not available'),
+                           done=True)
         pending = Pending()
 
         def done(future):
             try:
                 pending.set(answer(future.result()))
             except Exception as exc:   # the call failed in the client library
-                pending.set((False, f'{client.srv_name}: {exc}'))
+                pending.set((False, f'{self._full_name(client)}: {exc}'))
         client.call_async(request).add_done_callback(done)
         return pending

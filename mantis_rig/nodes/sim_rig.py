@@ -37,15 +37,17 @@ class SimRig:
     """The world and the three simulated device nodes.
 
     `parameters`: node name -> parameter overrides (each device node's `backend` is sim).
-    `context`: the rclpy context (default the global one)."""
+    `context`: the rclpy context (default the global one). `namespace`: the rig's (default:
+    the process's, '/' unless remapped with `-r __ns:=...`)."""
 
-    def __init__(self, parameters: dict | None = None, context=None):
+    def __init__(self, parameters: dict | None = None, context=None,
+                 namespace: str | None = None):
         parameters = parameters or {}
         self.clock = SharedSimClock()
         self.nodes = []
         try:
             self.world_node = self._add(WORLD.node_class()(
-                node_name=WORLD.name, context=context,
+                node_name=WORLD.name, context=context, namespace=namespace,
                 parameter_overrides=_overrides(parameters.get(WORLD.name, {}))))
             self.world_node.clock_listeners.append(self.clock.on_clock)
             port = LocalWorldPort(self.world_node.runner)
@@ -53,7 +55,8 @@ class SimRig:
                 values = {**parameters.get(entry.name, {}), 'backend': 'sim'}
                 values.pop('use_sim_time', None)       # the shared clock is the world's
                 self._add(entry.node_class()(
-                    node_name=entry.name, context=context, parameter_overrides=_overrides(values),
+                    node_name=entry.name, context=context, namespace=namespace,
+                    parameter_overrides=_overrides(values),
                     world_port=port, sim_clock=self.clock))
         except BaseException:
             self.destroy_node()

@@ -16,12 +16,12 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock as RosClock
 from rclpy.clock import ClockType
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray
 
+from mantis_rig import contract
 from mantis_rig.hardware.local_world import WorldRunner
-from mantis_rig.nodes.device_node import Param, declare, param_value, time_msg
+from mantis_rig.nodes.device_node import declare, param_value, time_msg
 from mantis_rig.nodes.executors import SideNode
 from mantis_rig.recording.force_block import force_block_from_msg
 from mantis_sim.scene import load_scene
@@ -29,27 +29,14 @@ from mantis_sim.world import World
 
 from .lean_node import WithoutDefaultEventHandlers
 
-DEFAULT_SCENE = 'air_23mm_rig'
-DAQ_FORCE_TOPIC = '/loadcell/force_block'
-
-PARAMETERS = (
-    Param('scene', DEFAULT_SCENE, 'mantis_sim scene name (see `mantis scenes`) or YAML path'),
-    Param('set', [], 'scene overrides, key=value each (as `mantis simulate --set`)'),
-    Param('seed', 0, 'random seed (the world itself is deterministic; kept for the command '
-                     'line; sensor noise is seeded in the device nodes)', (0, 2**31 - 1)),
-    Param('real_time_factor', 1.0, 'simulated seconds per wall second (0: as fast as it can)',
-          (0.0, 1000.0)),
-    Param('step_s', 0.01, 'simulated time per world step, s', (1e-4, 0.1)),
-    Param('max_lead_s', 0.05, 'simulated time the world may run ahead of the load cell\'s '
-          '/loadcell/force_block stream while that streams, s (0: no limit)', (0.0, 10.0)),
-)
+PARAMETERS = contract.WORLD_PARAMETERS
 # The force stream counts as streaming while its last block is younger than this (wall time):
 # a load cell that stops must not stop the world.
 STREAM_ALIVE_S = 1.0
 
 
 class SimWorldNode(WithoutDefaultEventHandlers, Node):
-    def __init__(self, node_name: str = 'sim_world_node', **kwargs):
+    def __init__(self, node_name: str = contract.SIM_WORLD_NODE, **kwargs):
         super().__init__(node_name, **kwargs)
         for spec in PARAMETERS:
             declare(self, spec)
@@ -60,10 +47,12 @@ class SimWorldNode(WithoutDefaultEventHandlers, Node):
         self._step_index = round(self.world.time_s / self.step_s)
         self._phase = self.world.phase
 
-        self._clock_pub = self.create_publisher(Clock, '/clock', QoSProfile(depth=10))
+        self._clock_pub = self.create_publisher(Clock, contract.CLOCK.name,
+                                                contract.CLOCK.qos.publisher())
         # in-process followers of the world's time (the rig's shared sim clock)
         self.clock_listeners: list = []
-        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._diag_pub = self.create_publisher(DiagnosticArray, contract.DIAGNOSTICS.name,
+                                               contract.DIAGNOSTICS.qos.publisher())
         self.create_timer(1.0, self._publish_diagnostics,
                           clock=RosClock(clock_type=ClockType.STEADY_TIME))
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -75,9 +64,10 @@ class SimWorldNode(WithoutDefaultEventHandlers, Node):
         self.max_lead_s = value('max_lead_s')
         self._daq_end_s: float | None = None
         self._daq_heard = 0.0
-        self._pacing = SideNode(self, 'pacing')
-        self._pacing.node.create_subscription(Float64MultiArray, DAQ_FORCE_TOPIC,
-                                              self._on_daq_block, 100)
+        self._pacing = SideNode(self, contract.PACING_SUFFIX)
+        self._pacing.node.create_subscription(Float64MultiArray, contract.FORCE_BLOCK.name,
+                                              self._on_daq_block,
+                                              contract.FORCE_BLOCK.qos.subscriber())
         self.runner = _StepRunner(self.world, value('real_time_factor'), self.step_s, self)
         self.runner.start()
         self.get_logger().info(

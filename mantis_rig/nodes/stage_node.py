@@ -24,24 +24,18 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import Trigger
 
+from mantis_rig import contract
+from mantis_rig.contract import FORCE_CEILING_NAME
 from mantis_rig.hardware import backends
-from mantis_rig.hardware.apt_units import Z8_COUNTS_PER_MM
 from mantis_rig.hardware.interfaces import (
     ConfigurationError,
     DeviceError,
     SafetyLimitError,
-    StageLimits,
 )
 from mantis_rig.nodes.clock_ticker import ClockTicker
-from mantis_rig.nodes.device_node import ERROR, OK, WARN, DeviceNode, Param
+from mantis_rig.nodes.device_node import ERROR, OK, WARN, DeviceNode
 from mantis_rig.nodes.executors import SideNode, run_node
 from mantis_rig.recording.force_block import force_block_from_msg
-from mantis_rig.trial.safety_limits import (
-    FORCE_CEILING_DEFAULT_N,
-    FORCE_CEILING_DESCRIPTION,
-    FORCE_CEILING_NAME,
-    FORCE_CEILING_RANGE_N,
-)
 
 HOME_TIMEOUT_S = 120.0
 MOVE_TIMEOUT_S = 120.0
@@ -49,33 +43,22 @@ MOVE_TIMEOUT_S = 120.0
 
 class StageNode(DeviceNode):
     DEVICE = 'stage'
-    PARAMETERS = (
-        Param('serial_port', backends.DEFAULT_SERIAL_PORT, 'hardware: KDC101 serial port'),
-        Param('stage_serial_number', '', 'hardware: the KDC101 by its serial number (27...), or '
-              '"auto" for the only KDC101 on the machine; when set, it chooses the port '
-              'instead of serial_port (mantis doctor lists the controllers)'),
-        Param('counts_per_mm', Z8_COUNTS_PER_MM, 'hardware: encoder counts per mm (Z8: '
-              '34554.96 per the APT protocol, 34304 per the stage data sheet)', (1e3, 1e6)),
-        Param('move_speed_m_per_s', 1.0e-3, 'speed of /stage/position_command moves, m/s',
-              (1e-6, StageLimits().max_speed_m_per_s), at_configure=False),
-        Param('joint_state_rate_hz', 100.0, '/stage/joint_state rate, Hz (read at activate)',
-              (1.0, 1000.0), at_configure=False),
-        Param(FORCE_CEILING_NAME, FORCE_CEILING_DEFAULT_N, 'the stage driver\'s guard: '
-              + FORCE_CEILING_DESCRIPTION, FORCE_CEILING_RANGE_N, at_configure=False),
-        Param('max_force_age_s', 0.5, 'a pull needs a force reading at most this old, s; a '
-              'pull whose readings stop is stopped', (0.05, 10.0)),
-    )
+    PARAMETERS = contract.STAGE_PARAMETERS
 
-    def __init__(self, node_name: str = 'stage_node', **kwargs):
+    def __init__(self, node_name: str = contract.STAGE_NODE, **kwargs):
         super().__init__(node_name, **kwargs)
-        self._state_pub = self.create_publisher(JointState, '/stage/joint_state', 10)
-        self.create_subscription(Float64, '/stage/velocity_command', self._on_velocity, 10,
+        c = contract
+        self._state_pub = self.create_publisher(JointState, c.JOINT_STATE.name,
+                                                c.JOINT_STATE.qos.publisher())
+        self.create_subscription(Float64, c.VELOCITY_COMMAND.name, self._on_velocity,
+                                 c.VELOCITY_COMMAND.qos.subscriber(),
                                  callback_group=self.services_group)
-        self.create_subscription(Float64, '/stage/position_command', self._on_position, 10,
+        self.create_subscription(Float64, c.POSITION_COMMAND.name, self._on_position,
+                                 c.POSITION_COMMAND.qos.subscriber(),
                                  callback_group=self.services_group)
-        self.create_service(Trigger, '/stage/home', self._on_home,
+        self.create_service(Trigger, c.STAGE_HOME.name, self._on_home,
                             callback_group=self.services_group)
-        self.create_service(Trigger, '/stage/stop', self._on_stop,
+        self.create_service(Trigger, c.STAGE_STOP.name, self._on_stop,
                             callback_group=self.services_group)
         self._state_ticker = None
         self._move: threading.Thread | None = None
@@ -85,9 +68,10 @@ class StageNode(DeviceNode):
         self._stopping = False          # a move ending now was stopped on purpose
         self._reported_trip: str | None = None
         self.add_post_set_parameters_callback(self._on_parameters_set)
-        self._force_feed = SideNode(self, 'force_guard')
-        self._force_feed.node.create_subscription(Float64MultiArray, '/loadcell/force_block',
-                                                  self._on_force_block, 100)
+        self._force_feed = SideNode(self, contract.FORCE_GUARD_SUFFIX)
+        self._force_feed.node.create_subscription(Float64MultiArray, contract.FORCE_BLOCK.name,
+                                                  self._on_force_block,
+                                                  contract.FORCE_BLOCK.qos.subscriber())
 
     # --- lifecycle hooks --------------------------------------------------------------------
     def open_device(self, port):
@@ -95,7 +79,7 @@ class StageNode(DeviceNode):
                                     serial_port=self.param('serial_port'),
                                     stage_serial_number=self.param('stage_serial_number'),
                                     counts_per_mm=self.param('counts_per_mm'),
-                                    force_ceiling_n=self.param('force_ceiling_n'),
+                                    force_ceiling_n=self.param(FORCE_CEILING_NAME),
                                     max_force_age_s=self.param('max_force_age_s'),
                                     clock_s=self._guard_clock())
         choice = getattr(getattr(stage, 'stage', stage), 'choice', None)

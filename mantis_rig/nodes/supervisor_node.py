@@ -24,27 +24,28 @@ from sensor_msgs.msg import JointState, TimeReference
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
+from mantis_rig import contract
+from mantis_rig.contract import DEVICE_NODES
 from mantis_rig.recording import TRIAL_CONDITIONS, BagWriteError, BagWriter
 from mantis_rig.recording.force_block import force_block_from_msg
 from mantis_rig.recording.marker_block import marker_block_from_msg
 from mantis_rig.trial.conditions import PARAMETERS, ConditionError, TrialConditions, check_value
 from mantis_rig.trial.log_space import free_space_problem
-from mantis_rig.trial.sequence import DEVICE_NODES, TrialSequence
+from mantis_rig.trial.sequence import TrialSequence
 
 from .executors import SideNode, light_executor, run_node
 from .lean_node import WithoutDefaultEventHandlers
-from .recorder import LATCHED, RELIABLE, Recorder
+from .recorder import Recorder
 from .rig_client import RigClient
 
-NODE_NAME = 'supervisor_node'
-STATUS_NAME = 'supervisor_node: trial'
+NODE_NAME = contract.SUPERVISOR_NODE
+STATUS_NAME = f'{NODE_NAME}: trial'
 LOG_WRITE_FAILED = 'log write failed'     # how the abort reason of a failed log begins
 LOG_TAIL_WAIT_S = 2.0
 
 
 def _descriptor(name, spec) -> ParameterDescriptor:
-    text = f'{spec.description}' + (f' [{spec.unit}]' if spec.unit else '')
-    descriptor = ParameterDescriptor(name=name, description=text)
+    descriptor = ParameterDescriptor(name=name, description=spec.description)
     if spec.low is not None:
         descriptor.floating_point_range = [FloatingPointRange(
             from_value=float(spec.low), to_value=float(spec.high), step=0.0)]
@@ -79,31 +80,35 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
         self._final_state_bytes: bytes | None = None
         self._final_state_logged = threading.Event()
 
-        self._state_pub = self.create_publisher(String, '/supervisor/state', LATCHED)
-        self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', RELIABLE)
+        c = contract
+        self._state_pub = self.create_publisher(String, c.SUPERVISOR_STATE.name,
+                                                c.SUPERVISOR_STATE.qos.publisher())
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, c.DIAGNOSTICS.name,
+                                                      c.DIAGNOSTICS.qos.publisher())
         self.rig = RigClient(self, self._group, self._publish_state)
         # The recorder's ~400 messages a second go through a lean node of their own: through
         # this node's executor (in one process shared with sim_world_node) they reached the
         # trial 0.1-0.5 s late, and the camera's buffer missed the strike.
-        self._recorder_node = SideNode(self, 'recorder')
+        self._recorder_node = SideNode(self, c.RECORDER_SUFFIX)
         self.recorder = Recorder(self._recorder_node.node, clock=self.get_clock())
         self.recorder.on_written = self._on_logged
         group = {'callback_group': self._group}
-        self.create_service(Trigger, '/supervisor/start_trial', self._on_start, **group)
-        self.create_service(Trigger, '/supervisor/abort', self._on_abort, **group)
+        self.create_service(Trigger, c.START_TRIAL.name, self._on_start, **group)
+        self.create_service(Trigger, c.ABORT.name, self._on_abort, **group)
         # What the trial watches arrives through the recorder's raw subscriptions (one
-        # callback per message for both jobs), deserialized here before it is logged.
+        # callback per message for both jobs), deserialized here before it is logged. The
+        # recorder's hooks name each topic by its contract name (relative).
         self._watched = {
-            '/loadcell/force_block': (Float64MultiArray, self._on_force),
-            '/stage/joint_state': (JointState, self._on_joint_state),
-            '/camera/trigger_time': (TimeReference, self._on_trigger_time),
-            '/camera/markers': (Float64MultiArray, self._on_markers),
-            '/diagnostics': (DiagnosticArray, self._on_diagnostics),
+            c.FORCE_BLOCK.name: (Float64MultiArray, self._on_force),
+            c.JOINT_STATE.name: (JointState, self._on_joint_state),
+            c.TRIGGER_TIME.name: (TimeReference, self._on_trigger_time),
+            c.MARKERS.name: (Float64MultiArray, self._on_markers),
+            c.DIAGNOSTICS.name: (DiagnosticArray, self._on_diagnostics),
         }
         self.recorder.on_message = self._on_recorded
         for device in DEVICE_NODES:
             self.create_subscription(
-                TransitionEvent, f'/{device}/transition_event',
+                TransitionEvent, c.node_interface(device, c.TRANSITION_EVENT),
                 lambda msg, device=device: self._on_transition(device, msg), 10, **group)
         self.create_timer(1.0, self._publish_diagnostics,
                           clock=Clock(clock_type=ClockType.STEADY_TIME), **group)
@@ -145,7 +150,8 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
         return response
 
     def _on_abort(self, request, response):
-        response.success, response.message = self.abort('abort requested (/supervisor/abort)')
+        response.success, response.message = self.abort(
+            f'abort requested ({contract.resolve(contract.ABORT, self.get_namespace())})')
         return response
 
     def start_trial(self) -> tuple[bool, str]:
@@ -208,7 +214,7 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
             watched[1](deserialize_message(data, watched[0]))
 
     def _on_logged(self, topic: str, data: bytes) -> None:
-        if topic == '/supervisor/state' and data == self._final_state_bytes:
+        if topic == contract.SUPERVISOR_STATE.name and data == self._final_state_bytes:
             self._final_state_logged.set()
 
     # ------------------------------------------------------------------ state

@@ -10,22 +10,26 @@ from rclpy.node import Node
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
+from mantis_rig import contract
+
 from .lean_node import WithoutDefaultEventHandlers
-from .recorder import LATCHED, RELIABLE
 from .supervisor_node import STATUS_NAME
 
 
 class TrialClient(WithoutDefaultEventHandlers, Node):
-    def __init__(self, node_name: str = 'mantis_trial_client', **kwargs):
+    def __init__(self, node_name: str = contract.TRIAL_CLIENT_NODE, **kwargs):
         super().__init__(node_name, **kwargs)
         self.states: list[str] = []
         self.trial_start = 0
         self._changed = threading.Condition()
-        self._start = self.create_client(Trigger, '/supervisor/start_trial')
-        self._abort = self.create_client(Trigger, '/supervisor/abort')
-        self.create_subscription(String, '/supervisor/state', self._on_state, LATCHED)
-        self.reason = ''            # the supervisor's reason for its state (its /diagnostics)
-        self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, RELIABLE)
+        c = contract
+        self._start = self.create_client(Trigger, c.START_TRIAL.name)
+        self._abort = self.create_client(Trigger, c.ABORT.name)
+        self.create_subscription(String, c.SUPERVISOR_STATE.name, self._on_state,
+                                 c.SUPERVISOR_STATE.qos.subscriber())
+        self.reason = ''            # the supervisor's reason for its state (its diagnostics)
+        self.create_subscription(DiagnosticArray, c.DIAGNOSTICS.name, self._on_diagnostics,
+                                 c.DIAGNOSTICS.qos.subscriber())
 
     def _on_state(self, msg) -> None:
         with self._changed:
@@ -49,13 +53,14 @@ class TrialClient(WithoutDefaultEventHandlers, Node):
     def call(self, which: str, timeout_s: float = 30.0) -> tuple[bool, str]:
         """Call start_trial or abort; (success, message), or (False, why) on timeout."""
         client = {'start_trial': self._start, 'abort': self._abort}[which]
+        name = self.resolve_service_name(client.srv_name)
         if not client.wait_for_service(timeout_sec=timeout_s):
-            return False, f'{client.srv_name} is not available after {timeout_s} s'
+            return False, f'{name} is not available after {timeout_s} s'
         future = client.call_async(Trigger.Request())
         done = threading.Event()
         future.add_done_callback(lambda _: done.set())
         if not done.wait(timeout_s):
-            return False, f'{client.srv_name} did not answer within {timeout_s} s'
+            return False, f'{name} did not answer within {timeout_s} s'
         return future.result().success, future.result().message
 
     def wait_for_state(self, states, after: int = 0, timeout_s: float = 120.0) -> str | None:

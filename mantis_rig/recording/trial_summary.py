@@ -5,13 +5,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import math
 
+from mantis_rig import contract
 from mantis_rig.recording import TRIAL_CONDITIONS, TRIAL_OUTCOME, BagReader
 from mantis_rig.recording.force_block import force_block_from_msg
 from mantis_rig.recording.marker_block import concatenate, marker_block_from_msg
 from mantis_rig.trial.force_monitor import ForceMonitor
-
-FORCE_TOPIC = '/loadcell/force_block'
-MARKER_TOPIC = '/camera/markers'
 
 
 @dataclass
@@ -33,6 +31,7 @@ class TrialSummary:
     trigger_s: float | None = None
     marker_span_s: tuple | None = None
     marker_frames: int = 0
+    namespace: str = '/'      # the rig's, in which the bag's topics were recorded
 
     def state_time(self, state: str) -> float | None:
         return next((t for s, t in self.states if s == state), None)
@@ -51,16 +50,21 @@ def summarize(path, release_jump_n: float = 1.0) -> TrialSummary:
         outcome=reader.metadata(TRIAL_OUTCOME) or {},
         conditions=reader.metadata(TRIAL_CONDITIONS) or {},
         topic_counts={name: info.message_count for name, info in reader.topics.items()})
+    summary.namespace = contract.bag_namespace(reader.topics)
+    wanted = (contract.FORCE_BLOCK, contract.MARKERS, contract.SUPERVISOR_STATE,
+              contract.TRIGGER_TIME)
+    by_name = {contract.resolve(topic, summary.namespace): topic for topic in wanted}
     blocks, markers = [], []
     for message in reader.messages():
         t_s = message.log_time_ns * 1e-9
-        if message.topic == FORCE_TOPIC:
+        topic = by_name.get(message.topic)
+        if topic is contract.FORCE_BLOCK:
             blocks.append(force_block_from_msg(message.message))
-        elif message.topic == MARKER_TOPIC:
+        elif topic is contract.MARKERS:
             markers.append(marker_block_from_msg(message.message))
-        elif message.topic == '/supervisor/state':
+        elif topic is contract.SUPERVISOR_STATE:
             summary.states.append((message.message.data, t_s))
-        elif message.topic == '/camera/trigger_time' and summary.trigger_s is None:
+        elif topic is contract.TRIGGER_TIME and summary.trigger_s is None:
             stamp = message.message.header.stamp
             summary.trigger_s = stamp.sec + stamp.nanosec * 1e-9
     _force(summary, sorted(blocks, key=lambda b: b.t0_s), release_jump_n)

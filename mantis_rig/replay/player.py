@@ -17,11 +17,11 @@ import time
 
 from rclpy.duration import Duration
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
-from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
 from mantis_sim.errors import InputError
 
+from ..contract import CLOCK, resolve
 from ..recording import BagError, BagReader
 from ..recording.interfaces import MessageTypeError, message_class
 from ..recording.qos import parse_offered_qos_string
@@ -29,10 +29,9 @@ from .qos import replay_qos
 from .readahead import ReadAhead
 from .schedule import PlaybackClock, TimingStats, raise_priority, sleep_until
 
-CLOCK_TOPIC = '/clock'
+CLOCK_TOPIC = resolve(CLOCK)        # in the player's namespace: the root's unless remapped
 RCLError = _rclpy.RCLError
 DISCOVERY_SETTLE_S = 0.2
-CLOCK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
 TIME_JUMP_CHOICES = ('refuse', 'skip')
 # the metadata's span is stated to the nanosecond; a little slack for writers that round it
 SPAN_TOLERANCE_NS = 1_000_000
@@ -66,6 +65,7 @@ class PlaybackReport:
     interrupted: bool = False
     scheduling: str = 'normal'  # of the playback thread
     time_jumps: list = field(default_factory=list)  # messages skipped outside the bag's span
+    clock_topic: str = CLOCK_TOPIC
 
     def __str__(self):
         s = self.stats.summary()
@@ -77,7 +77,7 @@ class PlaybackReport:
                  f'max {s["lateness_max_ms"]:.3f} ms; scheduling {self.scheduling}']
         lines += [f'  {topic}: {n}' for topic, n in self.published.items()]
         if self.clock_ticks:
-            lines.append(f'  {CLOCK_TOPIC}: {self.clock_ticks}')
+            lines.append(f'  {self.clock_topic}: {self.clock_ticks}')
         lines += [f'  skipped {topic}: {why}' for topic, why in self.skipped_topics.items()]
         lines += [f'  bag problem: {p}' for p in self.problems]
         lines += [f'  skipped (time jump): {jump}' for jump in self.time_jumps]
@@ -137,8 +137,10 @@ class BagPlayer:
             self.report.published[topic] = 0
         if not self.publishers:
             raise ReplayError(f'{path}: nothing to replay ({self.report.skipped_topics})')
-        self.clock_publisher = (node.create_publisher(Clock, CLOCK_TOPIC, CLOCK_QOS)
+        self.clock_publisher = (node.create_publisher(Clock, CLOCK.name, CLOCK.qos.publisher())
                                 if self.clock_hz else None)
+        if self.clock_publisher is not None:
+            self.report.clock_topic = self.clock_publisher.topic_name
 
     def wait_for_subscribers(self, timeout_s, stop=None) -> bool:
         """Wait until every replayed topic has a matched subscriber (True) or time runs out."""

@@ -12,12 +12,13 @@ checked against that same envelope.
 """
 from __future__ import annotations
 
-FORCE_CEILING_NAME = 'force_ceiling_n'
-FORCE_CEILING_DEFAULT_N = 30.0
-FORCE_CEILING_RANGE_N = (0.5, 100.0)          # under the load cell's 111 N capacity
-FORCE_CEILING_DESCRIPTION = ('tendon force above which the stage is stopped, N; one value for '
-                             'every guard: supervisor, stage driver and load-cell monitor')
-FORCE_GUARD_NODES = ('stage_node', 'loadcell_node')   # the guards beside the supervisor's own
+from mantis_rig.contract import FORCE_CEILING, FORCE_GUARD_NODES
+
+# the parameter is declared in mantis_rig.contract (FORCE_CEILING); these are its parts
+FORCE_CEILING_NAME = FORCE_CEILING.name
+FORCE_CEILING_DEFAULT_N = FORCE_CEILING.default
+FORCE_CEILING_RANGE_N = FORCE_CEILING.range          # under the load cell's 111 N capacity
+FORCE_CEILING_DESCRIPTION = FORCE_CEILING.description
 
 __all__ = ['FORCE_CEILING_DEFAULT_N', 'FORCE_CEILING_DESCRIPTION', 'FORCE_CEILING_NAME',
            'FORCE_CEILING_RANGE_N', 'FORCE_GUARD_NODES']

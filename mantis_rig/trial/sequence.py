@@ -18,7 +18,16 @@ import threading
 import time
 from typing import Protocol
 
-from mantis_rig.trial.safety_limits import FORCE_CEILING_NAME, FORCE_GUARD_NODES
+from mantis_rig.contract import (
+    CAMERA_ARM,
+    CAMERA_TRIGGER,
+    DEVICE_NODES,
+    FORCE_CEILING_NAME,
+    FORCE_GUARD_NODES,
+    STAGE_HOME,
+    STAGE_NODE,
+    TARE,
+)
 
 from .conditions import TrialConditions
 from .force_monitor import ForceMonitor
@@ -26,7 +35,6 @@ from .force_monitor import ForceMonitor
 STATES = ('idle', 'configuring', 'homing', 'taking_up_slack', 'taring', 'arming', 'pulling',
           'released', 'stopping', 'returning', 'done', 'aborted')
 FINAL_STATES = ('idle', 'done', 'aborted')
-DEVICE_NODES = ('stage_node', 'loadcell_node', 'camera_node')
 POLL_S = 0.005                   # the worker's control period
 AT_REST_M_PER_S = 1e-6
 # A move has ended when the stage rested this long, on the rig's clock: simulated time in
@@ -77,7 +85,7 @@ class RigPort(Protocol):
     def now_s(self) -> float: ...
     def get_state(self, node: str) -> Pending: ...
     def change_state(self, node: str, transition: str) -> Pending: ...
-    def call(self, service: str) -> Pending: ...          # std_srvs/Trigger, e.g. 'stage/home'
+    def call(self, service: str) -> Pending: ...          # std_srvs/Trigger, by contract name
     def set_camera(self, frame_rate_hz: float, pre_trigger_s: float,
                    post_trigger_s: float) -> Pending: ...
     def set_parameters(self, node: str, values: dict) -> Pending: ...
@@ -187,7 +195,7 @@ class TrialSequence:
                        f'at t = {hit[0]:.4f} s')
         elif release and not self._abort.is_set():
             self.rig.stop_stage()                        # the tendon stiffens after the strike
-            self._trigger_call = self.rig.call('camera/trigger')
+            self._trigger_call = self.rig.call(CAMERA_TRIGGER.name)
             self._set_state('released')
 
     def on_stage_state(self, position_m: float, velocity_m_per_s: float) -> None:
@@ -239,7 +247,7 @@ class TrialSequence:
             self._take_up_slack()
             if self.conditions.tare:
                 self._set_state('taring')
-                self._await(self.rig.call('loadcell/tare'), 'loadcell tare')
+                self._await(self.rig.call(TARE.name), 'loadcell tare')
             self._arm()
             self._pull()
             self._stop_and_record()
@@ -313,7 +321,7 @@ class TrialSequence:
                    'stage diagnostics')
         if self.stage_homed is False:
             self._set_state('homing')
-            self._await(self.rig.call('stage/home'), 'stage home')
+            self._await(self.rig.call(STAGE_HOME.name), 'stage home')
         if self.conditions.start_position_mm >= 0:
             error_m = self._move_to(self.conditions.start_position_mm * 1e-3,
                                     'move to the start position')
@@ -375,7 +383,7 @@ class TrialSequence:
         c = self.conditions
         self._await(self.rig.set_camera(c.frame_rate_hz, c.pre_trigger_s, c.post_trigger_s),
                     'set camera parameters')
-        self._await(self.rig.call('camera/arm'), 'camera arm')
+        self._await(self.rig.call(CAMERA_ARM.name), 'camera arm')
 
     def _pull(self) -> None:
         self.pull_start_position_m = self.stage_position_m
@@ -399,7 +407,7 @@ class TrialSequence:
             if not self._at_rest() or done():
                 return
         self._fail(f'{what}: the stage did not start moving after {MOVE_ATTEMPTS} velocity '
-                   'commands' + self._device_hint('stage_node'))
+                   'commands' + self._device_hint(STAGE_NODE))
 
     def _stop_and_record(self) -> None:
         self._set_state('stopping')

@@ -1,0 +1,548 @@
+"""The rig's ROS contract, declared once: every topic (relative name, message type, QoS), every
+service, every node name and every parameter of mantis_rig. Everything else takes its names
+from here; ``docs/ros_interfaces.md`` holds a section generated from this module
+(``python -m mantis_rig.contract``), which a test compares with it.
+
+Names are relative (no leading '/'): a node resolves them in its own namespace, so
+``--ros-args -r __ns:=/rig2`` (or ``mantis bringup``'s namespace) runs a second rig beside the
+first in one ROS domain. A bag holds the fully resolved names it was recorded with
+(``/rig2/loadcell/force_block``); readers find a contract topic in a bag by its name relative to
+the rig's namespace (:func:`bag_namespace`, :func:`bag_topic`).
+
+QoS: one profile per kind of stream (:class:`StreamQos`); publishers and subscribers of a topic
+both take theirs from its kind, so they always match (reliability and durability are what DDS
+matches; nothing reports a mismatch between two of our nodes, mantis_rig/nodes/lean_node.py).
+Every kind is reliable: there are no best-effort publishers.
+
+No ROS import at module level (rclpy is imported only to build a QoSProfile), and nothing of
+mantis_rig beyond the parameter checks, which import what they need when they run.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+import math
+
+
+# ============================================================================ QoS
+@dataclass(frozen=True)
+class StreamQos:
+    """The QoS of one kind of stream. ``depth`` is the keep-last history of the publishers
+    and of the subscribers; ``queue`` (if set) is the subscribers' history where it must be
+    deeper than what a late joiner is given (the latched state: a late joiner gets the current
+    state only, a subscriber must still not lose a change that follows another at once).
+    Depth takes no part in QoS matching."""
+
+    kind: str
+    doc: str
+    depth: int
+    transient_local: bool = False
+    queue: int | None = None
+
+    @property
+    def subscriber_depth(self) -> int:
+        return self.queue or self.depth
+
+    def _profile(self, depth: int):
+        from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                          reliability=ReliabilityPolicy.RELIABLE,
+                          durability=(DurabilityPolicy.TRANSIENT_LOCAL if self.transient_local
+                                      else DurabilityPolicy.VOLATILE))
+
+    def publisher(self):
+        """The rclpy QoSProfile a publisher of this kind offers (and a bag stores)."""
+        return self._profile(self.depth)
+
+    def subscriber(self):
+        """The rclpy QoSProfile a subscription of this kind asks for."""
+        return self._profile(self.subscriber_depth)
+
+    def describe(self) -> str:
+        durability = 'transient local' if self.transient_local else 'volatile'
+        queue = f', subscribers {self.queue}' if self.queue else ''
+        return f'reliable, {durability}, keep last {self.depth}{queue}'
+
+
+SENSOR_QOS = StreamQos('sensor', 'measurements streamed by a device (room for bursts: marker '
+                       'blocks, a stalled subscriber)', depth=1000)
+COMMAND_QOS = StreamQos('command', 'commands to the stage', depth=10)
+STATUS_QOS = StreamQos('status', 'diagnostics', depth=100)
+STATE_QOS = StreamQos('state', 'the latched current state: a late joiner gets the latest',
+                      depth=1, transient_local=True, queue=10)
+CLOCK_QOS = StreamQos('clock', 'simulated time (rclpy\'s time source subscribes best effort, '
+                      'which a reliable publisher serves)', depth=10)
+QOS_KINDS = (SENSOR_QOS, COMMAND_QOS, STATUS_QOS, STATE_QOS, CLOCK_QOS)
+
+
+# ============================================================================ nodes
+SIM_WORLD_NODE = 'sim_world_node'
+STAGE_NODE = 'stage_node'
+LOADCELL_NODE = 'loadcell_node'
+CAMERA_NODE = 'camera_node'
+SUPERVISOR_NODE = 'supervisor_node'
+#: the device nodes, in bring-up order (the stage first: it is stopped first in an emergency)
+DEVICE_NODES = (STAGE_NODE, LOADCELL_NODE, CAMERA_NODE)
+#: the nodes of the stack, in start order
+RIG_NODES = (SIM_WORLD_NODE, *DEVICE_NODES, SUPERVISOR_NODE)
+#: the process that holds the world and the device nodes in sim mode (nodes.sim_rig)
+SIM_RIG_PROCESS = 'sim_rig'
+#: the guards that enforce the force ceiling beside the supervisor's own monitor
+FORCE_GUARD_NODES = (STAGE_NODE, LOADCELL_NODE)
+#: side nodes (executors.SideNode): named <owner>_<suffix>, in the owner's namespace
+RECORDER_SUFFIX = 'recorder'
+FORCE_GUARD_SUFFIX = 'force_guard'
+PACING_SUFFIX = 'pacing'
+#: nodes of the command-line tools
+TRIAL_CLIENT_NODE = 'mantis_trial_client'
+LIVE_RELAY_NODE = 'mantis_live'
+REPLAY_NODE = 'mantis_replay'
+#: `ros2 run mantis_rig replay_node`
+REPLAY_NODE_EXECUTABLE = 'replay_node'
+TOOL_NODES = (TRIAL_CLIENT_NODE, LIVE_RELAY_NODE, REPLAY_NODE, REPLAY_NODE_EXECUTABLE)
+
+
+def side_node_name(owner: str, suffix: str) -> str:
+    return f'{owner}_{suffix}'
+
+
+# ============================================================================ topics, services
+@dataclass(frozen=True)
+class Topic:
+    name: str            # relative
+    type_name: str       # e.g. std_msgs/msg/Float64
+    qos: StreamQos
+    publisher: str       # who publishes it
+    doc: str
+
+    def __str__(self) -> str:
+        return self.name
+
+
+@dataclass(frozen=True)
+class Service:
+    name: str            # relative
+    type_name: str
+    server: str
+    doc: str
+
+    def __str__(self) -> str:
+        return self.name
+
+
+JOINT_STATE = Topic('stage/joint_state', 'sensor_msgs/msg/JointState', SENSOR_QOS, STAGE_NODE,
+                    "name ['stage'], position m, velocity m/s, effort [0.0] (not measured, "
+                    'never empty); at `joint_state_rate_hz` while active')
+VELOCITY_COMMAND = Topic('stage/velocity_command', 'std_msgs/msg/Float64', COMMAND_QOS,
+                         f'{SUPERVISOR_NODE}, {LOADCELL_NODE}',
+                         'move at this velocity, m/s (0 = stop); checked against the speed '
+                         'ceiling (stage_node subscribes)')
+POSITION_COMMAND = Topic('stage/position_command', 'std_msgs/msg/Float64', COMMAND_QOS,
+                         SUPERVISOR_NODE, 'move to this position, m, at `move_speed_m_per_s` '
+                         '(stage_node subscribes)')
+FORCE_BLOCK = Topic('loadcell/force_block', 'std_msgs/msg/Float64MultiArray', SENSOR_QOS,
+                    LOADCELL_NODE, 'full-rate samples: data[0] first-sample time s, data[1] '
+                    'period s, data[2:] forces N (mantis_rig/recording/force_block.py)')
+WRENCH = Topic('loadcell/wrench', 'geometry_msgs/msg/WrenchStamped', SENSOR_QOS, LOADCELL_NODE,
+               'decimated to `wrench_rate_hz`; wrench.force.x = tendon tension N')
+TRIGGER_TIME = Topic('camera/trigger_time', 'sensor_msgs/msg/TimeReference', SENSOR_QOS,
+                     CAMERA_NODE, 'one per trigger: header.stamp ROS time, time_ref device '
+                     'time, source `camera`')
+MARKERS = Topic('camera/markers', 'std_msgs/msg/Float64MultiArray', SENSOR_QOS, CAMERA_NODE,
+                'marker frames of the recorded window, m (simulation, imported tracking; '
+                'mantis_rig/recording/marker_block.py)')
+SUPERVISOR_STATE = Topic('supervisor/state', 'std_msgs/msg/String', STATE_QOS, SUPERVISOR_NODE,
+                         'the trial state: idle, configuring, homing, taking_up_slack, taring, '
+                         'arming, pulling, released, stopping, returning, done, aborted')
+DIAGNOSTICS = Topic('diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', STATUS_QOS,
+                    f'{SIM_WORLD_NODE}, the device nodes, {SUPERVISOR_NODE}',
+                    '1 Hz and on every state change; a status name starts with its node name')
+CLOCK = Topic('clock', 'rosgraph_msgs/msg/Clock', CLOCK_QOS,
+              f'{SIM_WORLD_NODE}, `mantis replay --clock`',
+              'simulated time (the world\'s; a replay\'s log time)')
+JOINT_ANGLES = Topic('analysis/joint_angles', 'sensor_msgs/msg/JointState', SENSOR_QOS,
+                     '`mantis import-tracking` (bag only)',
+                     'joint angles a tracker exported beside its markers, rad')
+
+#: every topic a trial's bag holds (the recorder's)
+TRIAL_TOPICS = (JOINT_STATE, VELOCITY_COMMAND, POSITION_COMMAND, FORCE_BLOCK, WRENCH,
+                TRIGGER_TIME, MARKERS, SUPERVISOR_STATE, DIAGNOSTICS)
+TOPICS = (*TRIAL_TOPICS, CLOCK, JOINT_ANGLES)
+TOPIC_BY_NAME = {t.name: t for t in TOPICS}
+
+_TRIGGER = 'std_srvs/srv/Trigger'
+STAGE_HOME = Service('stage/home', _TRIGGER, STAGE_NODE, 'home the stage (blocks until homed)')
+STAGE_STOP = Service('stage/stop', _TRIGGER, STAGE_NODE, 'stop the stage at once')
+TARE = Service('loadcell/tare', _TRIGGER, LOADCELL_NODE,
+               'make the current reading zero (tendon slack)')
+CAMERA_ARM = Service('camera/arm', _TRIGGER, CAMERA_NODE,
+                     'arm with `frame_rate_hz`, `pre_trigger_s`, `post_trigger_s`')
+CAMERA_TRIGGER = Service('camera/trigger', _TRIGGER, CAMERA_NODE, 'trigger now')
+START_TRIAL = Service('supervisor/start_trial', _TRIGGER, SUPERVISOR_NODE,
+                      'run one trial; answers at once (the message names the bag)')
+ABORT = Service('supervisor/abort', _TRIGGER, SUPERVISOR_NODE, 'abort the running trial')
+SERVICES = (STAGE_HOME, STAGE_STOP, TARE, CAMERA_ARM, CAMERA_TRIGGER, START_TRIAL, ABORT)
+#: the Trigger services the supervisor calls on the device nodes
+DEVICE_SERVICES = (STAGE_HOME, STAGE_STOP, TARE, CAMERA_ARM, CAMERA_TRIGGER)
+
+#: the standard per-node services and topics the stack uses (relative to the node's name)
+GET_STATE = 'get_state'
+CHANGE_STATE = 'change_state'
+SET_PARAMETERS = 'set_parameters'
+TRANSITION_EVENT = 'transition_event'
+
+
+def node_interface(node: str, interface: str) -> str:
+    """A node's standard service or topic (lifecycle, parameters), relative: the node's
+    full name, without the leading '/', then the interface."""
+    return f'{node}/{interface}'
+
+
+# ============================================================================ namespaces
+def resolve(name, namespace: str = '/') -> str:
+    """The fully qualified name of a relative contract name in ``namespace``."""
+    name = str(name)
+    if name.startswith('/'):
+        raise ValueError(f'{name!r} is absolute; contract names are relative')
+    namespace = '/' + namespace.strip('/') if namespace.strip('/') else ''
+    return f'{namespace}/{name}'
+
+
+def relative(full_name: str, namespace: str = '/') -> str:
+    """``full_name`` relative to ``namespace`` (ValueError if it is not under it)."""
+    prefix = resolve('', namespace)
+    if not full_name.startswith(prefix):
+        raise ValueError(f'{full_name} is not in the namespace {namespace}')
+    return full_name[len(prefix):]
+
+
+def bag_namespace(topic_names) -> str:
+    """The namespace in which a bag's contract topics were recorded ('/' or e.g. '/rig2'):
+    the one under which most of its topics are contract topics; '/' if none is."""
+    votes: dict[str, int] = {}
+    for full in topic_names:
+        for topic in TOPICS:
+            suffix = '/' + topic.name
+            if full.endswith(suffix):
+                namespace = full[:-len(suffix)] or '/'
+                votes[namespace] = votes.get(namespace, 0) + 1
+    if not votes:
+        return '/'
+    return max(votes, key=lambda ns: (votes[ns], ns == '/'))
+
+
+def bag_topic(topic_names, topic, namespace: str | None = None) -> str:
+    """The name under which a bag with ``topic_names`` holds the contract ``topic``, in the
+    bag's namespace (found from its topics unless given); the name it would have if absent."""
+    names = list(topic_names)
+    return resolve(topic, bag_namespace(names) if namespace is None else namespace)
+
+
+def find_topic(full_name: str) -> Topic | None:
+    """The contract topic that ``full_name`` is in whatever namespace, or None."""
+    return next((t for t in sorted(TOPICS, key=lambda t: -len(t.name))
+                 if full_name == '/' + t.name or full_name.endswith('/' + t.name)), None)
+
+
+def contract_topic(full_name: str, namespace: str = '/') -> Topic | None:
+    """The contract topic that ``full_name`` is in ``namespace``, or None."""
+    try:
+        return TOPIC_BY_NAME.get(relative(full_name, namespace))
+    except ValueError:
+        return None
+
+
+# ============================================================================ parameters
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter of a node: name, default, unit ('' for none), what it means, and its
+    allowed range (inclusive) or choices. ``at_configure``: a device node applies it at
+    configure and refuses a change while configured. ``check`` raises ValueError with the
+    reason for a value a range cannot express."""
+
+    name: str
+    default: object
+    unit: str
+    doc: str
+    range: tuple | None = None
+    choices: tuple | None = None
+    at_configure: bool = False
+    check: Callable | None = None
+
+    @property
+    def low(self):
+        return None if self.range is None else self.range[0]
+
+    @property
+    def high(self):
+        return None if self.range is None else self.range[1]
+
+    @property
+    def description(self) -> str:
+        """The text of the ROS parameter descriptor."""
+        return self.doc + (f' [{self.unit}]' if self.unit else '')
+
+    @property
+    def type_name(self) -> str:
+        if isinstance(self.default, bool):
+            return 'bool'
+        if isinstance(self.default, int):
+            return 'integer'
+        if isinstance(self.default, float):
+            return 'double'
+        if isinstance(self.default, (list, tuple)):
+            return 'string array'
+        return 'string'
+
+
+def _check_backend(value) -> None:
+    from mantis_rig.hardware.backends import check_backend
+    check_backend(value)
+
+
+def _check_scene(value) -> None:
+    from mantis_sim.scene import load_scene
+    load_scene(value)
+
+
+def _check_overrides(items) -> None:
+    for item in items or []:
+        if item and '=' not in item:
+            raise ValueError(f'override {item!r} is not key=value')
+
+
+def _check_channel(value) -> None:
+    from mantis_rig.hardware.nidaq import parse_ai_channel
+    parse_ai_channel(value)
+
+
+def _check_lines(value) -> None:
+    from mantis_rig.hardware.nidaq import parse_trigger_output
+    parse_trigger_output(value)
+
+
+BACKENDS = ('sim', 'hardware')
+DEFAULT_SCENE = 'air_23mm_rig'
+DEFAULT_SERIAL_PORT = '/dev/ttyUSB0'
+DEFAULT_TRIGGER_OUTPUT = 'Dev1/port0/line0'
+MEDIA = ('air', 'water', 'vacuum')
+# the stage driver's envelope (mantis_rig.hardware.interfaces.StageLimits, checked by a test)
+STAGE_MAX_SPEED_M_PER_S = 2.4e-3
+STAGE_TRAVEL_M = (0.5e-3, 24.5e-3)
+MAX_SPEED_MM_S = STAGE_MAX_SPEED_M_PER_S * 1e3
+MAX_TRAVEL_MM = (STAGE_TRAVEL_M[1] - STAGE_TRAVEL_M[0]) * 1e3
+
+#: the one force ceiling (mantis_rig.trial.safety_limits): the supervisor's parameter, and the
+#: same parameter on each of FORCE_GUARD_NODES
+FORCE_CEILING = ParamSpec(
+    'force_ceiling_n', 30.0, 'N', 'tendon force above which the stage is stopped; one value '
+    'for every guard: supervisor, stage driver and load-cell monitor',
+    (0.5, 100.0))                           # under the load cell's 111 N capacity
+FORCE_CEILING_NAME = FORCE_CEILING.name
+
+DEVICE_COMMON_PARAMETERS = (
+    ParamSpec('backend', 'sim', '', 'device backend: sim or hardware', choices=BACKENDS,
+              at_configure=True, check=_check_backend),
+    ParamSpec('scene', DEFAULT_SCENE, '', 'sim: scene whose sensor models the simulated '
+              f'device uses (the same scene as {SIM_WORLD_NODE})', at_configure=True,
+              check=_check_scene),
+    ParamSpec('set', [], '', f'sim: scene overrides, key=value each (as given to '
+              f'{SIM_WORLD_NODE})', at_configure=True, check=_check_overrides),
+    ParamSpec('seed', 0, '', 'sim: random seed of the sensor noise', (0, 2**31 - 1),
+              at_configure=True),
+)
+
+
+def _guard(who: str) -> ParamSpec:
+    return ParamSpec(FORCE_CEILING.name, FORCE_CEILING.default, FORCE_CEILING.unit,
+                     f'{who}: {FORCE_CEILING.doc}', FORCE_CEILING.range)
+
+
+STAGE_PARAMETERS = (
+    ParamSpec('serial_port', DEFAULT_SERIAL_PORT, '', 'hardware: KDC101 serial port',
+              at_configure=True),
+    ParamSpec('stage_serial_number', '', '', 'hardware: the KDC101 by its serial number '
+              '(27...), or "auto" for the only KDC101 on the machine; when set, it chooses the '
+              'port instead of serial_port (mantis doctor lists the controllers)',
+              at_configure=True),
+    ParamSpec('counts_per_mm', 34554.96, 'counts/mm', 'hardware: encoder counts per mm (Z8: '
+              '34554.96 per the APT protocol, 34304 per the stage data sheet)', (1e3, 1e6),
+              at_configure=True),
+    ParamSpec('move_speed_m_per_s', 1.0e-3, 'm/s', f'speed of {POSITION_COMMAND} moves',
+              (1e-6, STAGE_MAX_SPEED_M_PER_S)),
+    ParamSpec('joint_state_rate_hz', 100.0, 'Hz', f'{JOINT_STATE} rate (read at activate)',
+              (1.0, 1000.0)),
+    _guard('the stage driver\'s guard'),
+    ParamSpec('max_force_age_s', 0.5, 's', 'a pull needs a force reading at most this old; a '
+              'pull whose readings stop is stopped', (0.05, 10.0), at_configure=True),
+)
+LOADCELL_PARAMETERS = (
+    ParamSpec('channel', 'Dev1/ai0', '', 'hardware: analog input channel', at_configure=True,
+              check=_check_channel),
+    ParamSpec('sample_rate_hz', 20_000.0, 'Hz', 'sample rate', (1.0, 2e6), at_configure=True),
+    ParamSpec('block_size', 200, 'samples', f'samples per {FORCE_BLOCK} message',
+              (1, 1_000_000), at_configure=True),
+    ParamSpec('newtons_per_volt', 11.12, 'N/V', 'amplifier scale (IAA100: 10 V at 111 N)',
+              (1e-6, 1e6), at_configure=True),
+    _guard('the load cell\'s monitor'),
+    ParamSpec('wrench_rate_hz', 200.0, 'Hz', f'{WRENCH} rate', (0.1, 10_000.0)),
+)
+CAMERA_PARAMETERS = (
+    ParamSpec('frame_rate_hz', 19_000.0, 'frames/s', 'frame rate (read at arm)',
+              (1.0, 37_000.0)),
+    ParamSpec('pre_trigger_s', 0.05, 's', 'recorded time before the trigger (read at arm)',
+              (0.0, 1.0)),
+    ParamSpec('post_trigger_s', 0.05, 's', 'recorded time after the trigger (read at arm)',
+              (0.0, 1.0)),
+    ParamSpec('lines', DEFAULT_TRIGGER_OUTPUT, '', 'hardware: trigger output, a DO line '
+              '(Dev1/port0/line0) or a counter (Dev1/ctr0)', at_configure=True,
+              check=_check_lines),
+)
+WORLD_PARAMETERS = (
+    ParamSpec('scene', DEFAULT_SCENE, '', 'mantis_sim scene name (see `mantis scenes`) or '
+              'YAML path'),
+    ParamSpec('set', [], '', 'scene overrides, key=value each (as `mantis simulate --set`)'),
+    ParamSpec('seed', 0, '', 'random seed (the world itself is deterministic; kept for the '
+              'command line; sensor noise is seeded in the device nodes)', (0, 2**31 - 1)),
+    ParamSpec('real_time_factor', 1.0, '', 'simulated seconds per wall second (0: as fast as '
+              'it can)', (0.0, 1000.0)),
+    ParamSpec('step_s', 0.01, 's', 'simulated time per world step', (1e-4, 0.1)),
+    ParamSpec('max_lead_s', 0.05, 's', 'simulated time the world may run ahead of the load '
+              f'cell\'s {FORCE_BLOCK} stream while that streams (0: no limit)', (0.0, 10.0)),
+)
+#: the supervisor's parameters: the trial conditions (CONDITION_KEYS), then the procedure
+SUPERVISOR_PARAMETERS = (
+    ParamSpec('pull_speed_mm_s', 2.33, 'mm/s', 'stage pull speed during the trial',
+              (0.05, MAX_SPEED_MM_S)),
+    ParamSpec('medium', 'air', '', 'medium around the robot', choices=MEDIA),
+    ParamSpec('d_t_mm', 23.0, 'mm', 'tendon guide distance from the body pivot', (1.0, 100.0)),
+    ParamSpec('contact_angle_deg', 3.0, 'deg', 'contact angle (shim)', (-45.0, 45.0)),
+    FORCE_CEILING,
+    ParamSpec('travel_mm', 8.0, 'mm', 'abort when the pull has gone this far',
+              (0.1, MAX_TRAVEL_MM)),
+    ParamSpec('operator_note', '', '', 'free text stored with the trial'),
+    ParamSpec('scene', '', '', 'simulated scene (sim backend) or rig description'),
+    ParamSpec('backend', 'sim', '', 'device backend the stack runs with', choices=BACKENDS),
+    # procedure
+    ParamSpec('out', 'trials', '', 'directory under which each trial gets its bag directory'),
+    ParamSpec('tare', False, '', 'tare the load cell after taking up slack (hardware: true)'),
+    ParamSpec('slack_force_n', 0.3, 'N', 'the tendon counts as taut above this force',
+              (0.01, 5.0)),
+    ParamSpec('slack_speed_mm_s', 0.2, 'mm/s', 'stage speed while taking up slack',
+              (0.01, MAX_SPEED_MM_S)),
+    ParamSpec('supervisor_force_monitor', True, '', 'the supervisor aborts above '
+              f'{FORCE_CEILING.name} itself (false only to test the guards beneath it)'),
+    ParamSpec('release_jump_n', 1.0, 'N', 'release: 1 ms mean force moves by more than this',
+              (0.05, 50.0)),
+    ParamSpec('frame_rate_hz', 19000.0, 'frames/s', 'camera frame rate', (1.0, 37000.0)),
+    ParamSpec('pre_trigger_s', 0.3, 's', 'camera frames kept before the trigger (detection '
+              'latency must stay below it)', (0.0, 1.0)),
+    ParamSpec('post_trigger_s', 0.05, 's', 'camera frames kept after the trigger', (0.0, 1.0)),
+    ParamSpec('expect_markers', True, '', 'wait for the marker frames of the window '
+              '(simulation)'),
+    ParamSpec('phase_timeout_s', 60.0, 's', 'wall time any one phase may take before an abort',
+              (1.0, 3600.0)),
+    ParamSpec('position_tolerance_mm', 0.1, 'mm', 'a move has arrived when the stage rests '
+              'this close to its target', (0.001, 1.0)),
+    ParamSpec('start_position_mm', -1.0, 'mm', 'move here before the trial (<0: stay where the '
+              'stage is)', (-1.0, 25.0)),
+)
+CONDITION_KEYS = ('pull_speed_mm_s', 'medium', 'd_t_mm', 'contact_angle_deg', FORCE_CEILING.name,
+                  'travel_mm', 'operator_note', 'scene', 'backend')
+#: the supervisor sets these on camera_node before each arm
+CAMERA_WINDOW_PARAMETERS = ('frame_rate_hz', 'pre_trigger_s', 'post_trigger_s')
+
+#: node -> its own parameters (ROS's use_sim_time aside)
+NODE_PARAMETERS = {
+    SIM_WORLD_NODE: WORLD_PARAMETERS,
+    STAGE_NODE: DEVICE_COMMON_PARAMETERS + STAGE_PARAMETERS,
+    LOADCELL_NODE: DEVICE_COMMON_PARAMETERS + LOADCELL_PARAMETERS,
+    CAMERA_NODE: DEVICE_COMMON_PARAMETERS + CAMERA_PARAMETERS,
+    SUPERVISOR_NODE: SUPERVISOR_PARAMETERS,
+}
+
+
+# ============================================================================ the document
+DOC_BEGIN = '<!-- contract: generated by `python -m mantis_rig.contract`; do not edit -->'
+DOC_END = '<!-- contract: end -->'
+
+
+def _default_text(spec: ParamSpec) -> str:
+    value = spec.default
+    if isinstance(value, float) and math.isfinite(value) and value == int(value) \
+            and abs(value) < 1e6:
+        return f'{value:g}' if abs(value) >= 1e-3 or value == 0 else repr(value)
+    return repr(value) if not isinstance(value, str) else (f'`{value}`' if value else "''")
+
+
+def _allowed_text(spec: ParamSpec) -> str:
+    if spec.choices:
+        return ', '.join(spec.choices)
+    if spec.range:
+        low, high = (f'{v}' if isinstance(v, int) else f'{v:g}' for v in spec.range)
+        return f'{low} – {high}'
+    return ''
+
+
+def markdown() -> str:
+    """The contract's section of docs/ros_interfaces.md."""
+    lines = [DOC_BEGIN, '', '### Topics', '',
+             'Names are relative to the rig\'s namespace (`/` unless the rig runs in one, e.g. '
+             '`-r __ns:=/rig2`).', '',
+             '| topic | type | QoS | published by | meaning |', '|---|---|---|---|---|']
+    for t in TOPICS:
+        lines.append(f'| `{t.name}` | `{t.type_name}` | {t.qos.kind} | {t.publisher} | '
+                     f'{t.doc} |')
+    lines += ['', '### QoS kinds', '', '| kind | profile | for |', '|---|---|---|']
+    lines += [f'| {q.kind} | {q.describe()} | {q.doc} |' for q in QOS_KINDS]
+    lines += ['', '### Services', '', '| service | type | served by | meaning |',
+              '|---|---|---|---|']
+    lines += [f'| `{s.name}` | `{s.type_name}` | {s.server} | {s.doc} |' for s in SERVICES]
+    lines += ['', 'And each node\'s standard ones: `<node>/get_state`, `<node>/change_state`, '
+              '`<node>/transition_event` (device nodes: lifecycle), `<node>/set_parameters`.',
+              '', '### Nodes', '']
+    lines += [f'- `{name}`' for name in RIG_NODES]
+    lines += [f'- `{SIM_RIG_PROCESS}` (process): `{SIM_WORLD_NODE}` and the device nodes',
+              '- tools: ' + ', '.join(f'`{n}`' for n in TOOL_NODES)]
+    lines += ['', '### Parameters', '',
+              '*c*: applied at configure (a device node refuses a change while configured).', '',
+              '| node | parameter | type | default | unit | allowed | meaning |',
+              '|---|---|---|---|---|---|---|']
+    for node, specs in NODE_PARAMETERS.items():
+        for spec in specs:
+            flag = ' *c*' if spec.at_configure else ''
+            lines.append(f'| `{node}` | `{spec.name}`{flag} | {spec.type_name} | '
+                         f'{_default_text(spec)} | {spec.unit} | {_allowed_text(spec)} | '
+                         f'{spec.doc} |')
+    lines += ['', DOC_END]
+    return '\n'.join(lines) + '\n'
+
+
+def document_section(text: str) -> str | None:
+    """The generated section of a document's text, markers included (None if absent)."""
+    start, end = text.find(DOC_BEGIN), text.find(DOC_END)
+    if start < 0 or end < 0:
+        return None
+    return text[start:end + len(DOC_END)] + '\n'
+
+
+def update_document(path) -> bool:
+    """Rewrite the generated section of ``path``; True if it changed."""
+    from pathlib import Path
+    path = Path(path)
+    text = path.read_text(encoding='utf-8')
+    old = document_section(text)
+    if old is None:
+        raise ValueError(f'{path} has no generated section ({DOC_BEGIN})')
+    new_text = text.replace(old, markdown())
+    path.write_text(new_text, encoding='utf-8')
+    return new_text != text
+
+
+if __name__ == '__main__':
+    import sys
+    if len(sys.argv) > 1:
+        changed = update_document(sys.argv[1])
+        print(f'{sys.argv[1]}: {"updated" if changed else "up to date"}')
+    else:
+        sys.stdout.write(markdown())
