@@ -1,9 +1,11 @@
 """Two simulated rigs side by side in one ROS domain, each in a namespace of its own.
 
 The contract's names are relative, so a rig brought up in a namespace has every topic, service
-and node under it. Here two whole stacks (world, device nodes, supervisor, recorder) run in this
-process on one domain, under /rig_a and /rig_b, each with a trial client in its namespace; both
-trials run at once, and each rig records its own bag. Nothing may cross: each bag holds only
+and node under it. Here two whole stacks (world, device nodes, supervisor, recorder) run on one
+domain: /rig_a in this process (nodes created in the namespace), /rig_b as node processes
+started with `-r __ns:=/rig_b` (and rclpy's /clock remapped to the rig's, for the supervisor on
+use_sim_time), each with a trial client in its namespace; both trials run at once, and each
+rig records its own bag. Nothing may cross: each bag holds only
 its own rig's topics, its own trial's states (one pull, one end), only its own pull speed on the
 stage's velocity commands (the rigs pull at different speeds), and only diagnostics naming its
 own bag. Each bag is then analysed by its names relative to its namespace. Every wait is on a
@@ -26,6 +28,7 @@ from mantis_rig.recording.trial_summary import summarize
 pytestmark = pytest.mark.timeout(600)
 
 RIGS = {'/rig_a': 2.33, '/rig_b': 1.9}       # namespace -> pull speed, mm/s
+PROCESSES = {'/rig_a': 'single', '/rig_b': 'multi'}
 
 
 @pytest.fixture
@@ -37,6 +40,7 @@ def ros():
 
 def start_rig(namespace, pull_speed_mm_s, out: Path):
     config = StackConfig(scene=SCENE, real_time_factor=FAST, namespace=namespace,
+                         processes=PROCESSES[namespace],
                          supervisor={'out': str(out), 'operator_note': f'pytest {namespace}',
                                      'pull_speed_mm_s': pull_speed_mm_s},
                          devices=FAST_RETURN)
@@ -88,13 +92,16 @@ def test_two_rigs_in_two_namespaces_each_record_only_their_own_trial(ros, tmp_pa
     try:
         for namespace, speed in RIGS.items():
             rigs[namespace] = start_rig(namespace, speed, tmp_path / namespace.strip('/'))
+        for namespace, (stack, client) in rigs.items():
+            assert client.wait_for_supervisor(60.0, stack.check_processes), namespace
         bags = {}
         for namespace, (_, client) in rigs.items():       # both trials run at once
             ok, message = client.start_trial()
             assert ok, message
             bags[namespace] = bag_of(message)
-        for namespace, (_, client) in rigs.items():
-            assert client.wait_for_end(TRIAL_TIMEOUT_S) == 'done', (namespace, client.states)
+        for namespace, (stack, client) in rigs.items():
+            final = client.wait_for_end(TRIAL_TIMEOUT_S, alive=stack.check_processes)
+            assert final == 'done', (namespace, client.states)
             wait_closed(bags[namespace])
     finally:
         for stack, client in rigs.values():
