@@ -18,7 +18,18 @@ from typing import Optional
 
 from mantis_sim.errors import InputError
 
-from ..hardware.backends import DEFAULT_SERIAL_PORT, DEFAULT_TRIGGER_OUTPUT
+from ..contract import (
+    CAMERA_NODE,
+    DEFAULT_SCENE,
+    DEFAULT_SERIAL_PORT,
+    DEFAULT_TRIGGER_OUTPUT,
+    FORCE_CEILING_NAME,
+    FORCE_GUARD_NODES,
+    LOADCELL_NODE,
+    SIM_WORLD_NODE,
+    STAGE_NODE,
+    SUPERVISOR_NODE,
+)
 from ..hardware.interfaces import DaqConfig
 from ..trial.safety_limits import FORCE_CEILING_DEFAULT_N, FORCE_CEILING_RANGE_N
 
@@ -47,7 +58,7 @@ class RigParams:
     trigger_output: str = DEFAULT_TRIGGER_OUTPUT
     force_ceiling_n: float = FORCE_CEILING_DEFAULT_N
     out: str = 'trials'
-    scene: str = 'air_23mm_rig'
+    scene: str = DEFAULT_SCENE
     scene_overrides: tuple = field(default=())
     seed: int = 0
     expected_noise_n: float = EXPECTED_NOISE_N
@@ -61,20 +72,19 @@ class RigParams:
 
 # parameter -> (the sections it is read from, in order of precedence; the RigParams field)
 _KEYS = {
-    'serial_port': (('stage_node',), 'serial_port', str),
-    'stage_serial_number': (('stage_node',), 'stage_serial_number', str),
-    'counts_per_mm': (('stage_node',), 'counts_per_mm', float),
-    'channel': (('loadcell_node',), 'channel', str),
-    'sample_rate_hz': (('loadcell_node',), 'sample_rate_hz', float),
-    'newtons_per_volt': (('loadcell_node',), 'newtons_per_volt', float),
-    'block_size': (('loadcell_node',), 'block_size', int),
-    'lines': (('camera_node',), 'trigger_output', str),
-    'force_ceiling_n': (('supervisor_node', 'stage_node', 'loadcell_node'), 'force_ceiling_n',
-                        float),
-    'out': (('supervisor_node',), 'out', str),
-    'scene': (('supervisor_node', 'sim_world_node', 'stage_node'), 'scene', str),
-    'set': (('sim_world_node', 'loadcell_node'), 'scene_overrides', list),
-    'seed': (('loadcell_node', 'sim_world_node'), 'seed', int),
+    'serial_port': ((STAGE_NODE,), 'serial_port', str),
+    'stage_serial_number': ((STAGE_NODE,), 'stage_serial_number', str),
+    'counts_per_mm': ((STAGE_NODE,), 'counts_per_mm', float),
+    'channel': ((LOADCELL_NODE,), 'channel', str),
+    'sample_rate_hz': ((LOADCELL_NODE,), 'sample_rate_hz', float),
+    'newtons_per_volt': ((LOADCELL_NODE,), 'newtons_per_volt', float),
+    'block_size': ((LOADCELL_NODE,), 'block_size', int),
+    'lines': ((CAMERA_NODE,), 'trigger_output', str),
+    FORCE_CEILING_NAME: ((SUPERVISOR_NODE, *FORCE_GUARD_NODES), FORCE_CEILING_NAME, float),
+    'out': ((SUPERVISOR_NODE,), 'out', str),
+    'scene': ((SUPERVISOR_NODE, SIM_WORLD_NODE, STAGE_NODE), 'scene', str),
+    'set': ((SIM_WORLD_NODE, LOADCELL_NODE), 'scene_overrides', list),
+    'seed': ((LOADCELL_NODE, SIM_WORLD_NODE), 'seed', int),
 }
 _DOCTOR_KEYS = {'expected_noise_n': float, 'expected_offset_n': float}
 
@@ -142,10 +152,10 @@ def load_params(path: Optional[Path]) -> RigParams:
     params = replace(RigParams(source=str(path)), **values)
     low, high = FORCE_CEILING_RANGE_N
     if not low <= params.force_ceiling_n <= high:
-        raise ParamsError(f'{path}: force_ceiling_n = {params.force_ceiling_n:g} N is outside '
+        raise ParamsError(f'{path}: {FORCE_CEILING_NAME} = {params.force_ceiling_n:g} N is outside '
                           f'[{low:g}, {high:g}] N (mantis_rig/trial/safety_limits.py)')
     if params.counts_per_mm is not None and not 1e3 <= params.counts_per_mm <= 1e6:
-        raise ParamsError(f'{path}: stage_node.counts_per_mm = {params.counts_per_mm:g} is '
+        raise ParamsError(f'{path}: {STAGE_NODE}.counts_per_mm = {params.counts_per_mm:g} is '
                           f'outside [1000, 1000000]')
     return params
 
