@@ -7,7 +7,7 @@ Names are relative (no leading '/'): a node resolves them in its own namespace, 
 ``--ros-args -r __ns:=/rig2`` (or ``mantis bringup``'s namespace) runs a second rig beside the
 first in one ROS domain. A bag holds the fully resolved names it was recorded with
 (``/rig2/loadcell/force_block``); readers find a contract topic in a bag by its name relative to
-the rig's namespace (:func:`bag_namespace`, :func:`bag_topic`).
+the rig's namespace (:func:`bag_namespace`, :func:`resolve`).
 
 QoS: one profile per kind of stream (:class:`StreamQos`); publishers and subscribers of a topic
 both take theirs from its kind, so they always match (reliability and durability are what DDS
@@ -229,13 +229,6 @@ def bag_namespace(topic_names) -> str:
     if not votes:
         return '/'
     return max(votes, key=lambda ns: (votes[ns], ns == '/'))
-
-
-def bag_topic(topic_names, topic, namespace: str | None = None) -> str:
-    """The name under which a bag with ``topic_names`` holds the contract ``topic``, in the
-    bag's namespace (found from its topics unless given); the name it would have if absent."""
-    names = list(topic_names)
-    return resolve(topic, bag_namespace(names) if namespace is None else namespace)
 
 
 def find_topic(full_name: str) -> Topic | None:
