@@ -38,22 +38,30 @@ class RampedPull:
     def pulled(self, t: float) -> tuple[float, float, float]:
         if t <= 0.0:
             return 0.0, 0.0, 0.0
-        a, tau, tr = self.a, self.tau, self.t_ramp
-        if tau <= 0.0:
-            if t < tr:
-                return 0.5 * a * t * t, a * t, a
-            return 0.5 * a * tr * tr + self.v * (t - tr), self.v, 0.0
+        tau, tr = self.tau, self.t_ramp
         if t < tr:
-            decay = math.exp(-t / tau)
-            vel = a * (t - tau * (1.0 - decay))
-            pos = a * (0.5 * t * t - tau * t + tau * tau * (1.0 - decay))
-            return pos, vel, a * (1.0 - decay)
-        pos_r, vel_r, _ = self.pulled(tr) if tr > 0 else (0.0, 0.0, 0.0)
+            return self._ramping(t)
+        # After the ramp: the state at its end, in closed form (the solver asks for t = tr
+        # itself, at the breakpoint; this branch once found that state by calling pulled(tr),
+        # which came back here for ever: a RecursionError whenever tau > 0).
+        pos_r, vel_r, _ = self._ramping(tr) if tr > 0 else (0.0, 0.0, 0.0)
+        if tau <= 0.0:
+            return pos_r + self.v * (t - tr), self.v, 0.0
         decay = math.exp(-(t - tr) / tau)
         gap = vel_r - self.v
         vel = self.v + gap * decay
         pos = pos_r + self.v * (t - tr) + gap * tau * (1.0 - decay)
         return pos, vel, -gap * decay / tau
+
+    def _ramping(self, t: float) -> tuple[float, float, float]:
+        """The state at 0 <= t <= t_ramp, while the commanded velocity still ramps up."""
+        a, tau = self.a, self.tau
+        if tau <= 0.0:
+            return 0.5 * a * t * t, a * t, a
+        decay = math.exp(-t / tau)
+        vel = a * (t - tau * (1.0 - decay))
+        pos = a * (0.5 * t * t - tau * t + tau * tau * (1.0 - decay))
+        return pos, vel, a * (1.0 - decay)
 
     def breakpoints(self) -> list[float]:
         return [self.t_ramp] if self.t_ramp > 0 else []

@@ -429,8 +429,15 @@ class HybridSimulator:
         start_stretch = tg.length - l_free
         start_rate = tg.d1 * s[2] + tg.d3 * s[3] - l_free_dot
         events = self._events(mode, phase, after_peak, start_stretch, start_rate)
-        sol = self._solve_ivp(self._rhs(mode), (t0, t1), y0, method=self.method, rtol=self.rtol,
-                        atol=atol, events=events, dense_output=self.dense)
+        try:
+            sol = self._solve_ivp(self._rhs(mode), (t0, t1), y0, method=self.method,
+                                  rtol=self.rtol, atol=atol, events=events,
+                                  dense_output=self.dense)
+        except ValueError as exc:
+            # scipy's event location (brentq) finds no sign change where the step saw one:
+            # seen when the state has diverged (|values| ~ 1e31, steps of zero length)
+            raise SimulationError(f'integration failed after t = {t0:.6f} ms in phase {phase}: '
+                                  f'an event could not be located ({exc})') from exc
         if sol.status == -1:
             raise SimulationError(f'integration failed at t = {sol.t[-1]:.6f} ms in phase '
                                   f'{phase}: {sol.message}')

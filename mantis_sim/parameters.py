@@ -101,9 +101,10 @@ class Medium:
     name: str = param('air', '', 'medium the robot strikes in', choices=('air', 'water', 'vacuum'))
     density_g_per_mm3: float = param(1.225e-6, 'g/mm^3', 'fluid density (water: 750 x air, as '
                                       'in the authors\' fits)', 0.0, 0.01)
+    # At least 1e-9 m/s: its square enters the drag's |v| (FluidDrag); below ~1e-162 m/s that
+    # square is 0.0 and a strip at rest divided zero by zero.
     regularisation_speed_m_per_s: float = param(
-        1e-4, 'm/s', 'speed below which the angle of attack is smoothed out', 0.0, 1.0,
-        lo_open=True)
+        1e-4, 'm/s', 'speed below which the angle of attack is smoothed out', 1e-9, 1.0)
 
 
 @dataclass(frozen=True)

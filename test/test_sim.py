@@ -740,3 +740,17 @@ def test_cli_json_keys_are_exactly_the_issues(capsys):
     assert data['effects'] == ['joint_damping', 'hinge_stiffness', 'fluid_drag', 'tendon_slack',
                                'contact_restitution']
     assert data['solver'] == 'DOP853' and data['rtol'] == 1e-7 and data['rhs_evals'] > 0
+
+
+def test_ramped_pull_with_a_following_error_is_continuous_at_the_ramps_end(capsys):
+    """Issue 25: with stage_profile and a following error (tau > 0), RampedPull found the state
+    at the ramp's end by calling itself at that time, which came back to the same branch: every
+    pull at or after the ramp's end was a RecursionError, and `mantis sim` ended in it."""
+    pull = drive.RampedPull(2.33e-3, 4e-6, 5.0)
+    tr = pull.t_ramp
+    before, at, after = pull.pulled(tr * (1 - 1e-12)), pull.pulled(tr), pull.pulled(tr + 1.0)
+    assert at == pytest.approx(before, rel=1e-9)
+    assert after[0] > at[0] and 0 < after[1] < 2.33e-3
+    assert mantis(['sim', '--scene', 'air_23mm_rig', '--json',
+                   '--set', 'drive.following_time_constant_ms=5']) == 0
+    assert json.loads(capsys.readouterr().out)['peak_tip_speed_mps'] > 0
