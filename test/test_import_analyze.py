@@ -483,3 +483,36 @@ def test_a_bag_states_its_camera_frame(imported_bag, tmp_path):
         bad = rewritten_copy(imported_bag, tmp_path / key, conditions={key: value})
         with pytest.raises(TrackFormatError, match=key):
             read_trial_bag(bad)
+
+
+def test_a_tracking_file_with_gaps_is_imported_and_analysed_as_directly(capsys, tmp_path):
+    """Issue 25: a CSV with empty cells (frames where every marker was lost) was analysed by
+    `mantis analyze` but ended `mantis import-tracking` in an IndexError: the angles were
+    written by the file's frame index, the analysis having none for the gaps. Both routes now
+    analyse the frames that were tracked, and give the same numbers."""
+    import gzip
+    lines = gzip.open(DATA, 'rt').read().splitlines()
+    gaps = list(range(1000, 1010)) + list(range(30000, 30003))
+    for k in gaps:
+        cells = lines[k + 1].split(',')
+        lines[k + 1] = ','.join(cells[:2] + [''] * (len(cells) - 2))
+    with_gaps = tmp_path / 'gaps.csv'
+    with_gaps.write_text('\n'.join(lines) + '\n')
+    bag = tmp_path / 'bag'
+    code, out, err = run(capsys, 'import-tracking', with_gaps, '--out', bag)
+    assert code == 0 and err == '', err
+    analysis = analyze_tracks(load_tracks(with_gaps))
+    assert len(analysis.time_s) == N_FRAMES - len(gaps)
+    reader = BagReader(bag)
+    assert reader.topics[ANGLES_TOPIC].message_count == N_FRAMES - len(gaps)
+    angles = [m for _, _, _, m in reader.messages([ANGLES_TOPIC])]
+    for i in (999, 1000, 40_000):          # the last before the first gap, then after it
+        stamp = angles[i].header.stamp
+        assert stamp.sec + stamp.nanosec * 1e-9 == pytest.approx(analysis.time_s[i], abs=1e-9)
+        assert list(angles[i].position) == [analysis.theta1_rad[i], analysis.theta3_rad[i]]
+    code, direct, _ = analyze_json(capsys, with_gaps)
+    assert code == 0
+    code, from_bag, _ = analyze_json(capsys, bag)
+    assert code == 0
+    for key in ('peak_tip_speed_mps', 'max_spring_energy_mJ', 'L1_mm', 'peak_tip_speed_s'):
+        assert from_bag[key] == pytest.approx(direct[key], rel=1e-9), key

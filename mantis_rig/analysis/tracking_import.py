@@ -82,7 +82,7 @@ def write_tracking_bag(tracks: MarkerTracks, output, analysis: TrialAnalysis | N
     stated by the user; they join ``trial_conditions`` so that analysing the bag uses them.
     """
     origin_s = min(0.0, float(tracks.time_s[0]))
-    log_ns = np.round((tracks.time_s - origin_s) * 1e9).astype(np.int64)
+    log_ns = _log_ns(tracks.time_s, origin_s)
     n_blocks = n_angles = 0
     with BagWriter(output, sync_period_s=0) as bag:
         bag.add_topic(MARKERS_TOPIC, 'std_msgs/msg/Float64MultiArray')
@@ -99,7 +99,8 @@ def write_tracking_bag(tracks: MarkerTracks, output, analysis: TrialAnalysis | N
         for start in range(0, tracks.n_frames, frames_per_block):
             stop = min(start + frames_per_block, tracks.n_frames)
             if analysis is not None:
-                n_angles += _write_angles(bag, analysis, log_ns, start, stop)
+                n_angles += _write_angles(bag, analysis, origin_s, tracks.time_s[start],
+                                          tracks.time_s[stop - 1])
             block = marker_block_to_msg(
                 tracks.time_s[start:stop],
                 {name: xy[start:stop] * _M_PER_MM for name, xy in tracks.markers_mm.items()})
@@ -108,12 +109,20 @@ def write_tracking_bag(tracks: MarkerTracks, output, analysis: TrialAnalysis | N
     return ImportReport(Path(output), tracks.n_frames, n_blocks, n_angles, origin_s)
 
 
-def _write_angles(bag, a: TrialAnalysis, log_ns, start, stop) -> int:
+def _log_ns(time_s: np.ndarray, origin_s: float) -> np.ndarray:
+    return np.round((time_s - origin_s) * 1e9).astype(np.int64)
+
+
+def _write_angles(bag, a: TrialAnalysis, origin_s: float, first_s: float, last_s: float) -> int:
+    """The angles of the analysed frames from first_s to last_s (the frames of one marker
+    block). The analysis has no angles for the frames in gaps (too few markers tracked): its
+    own times say which frames it has, not their index among the file's."""
+    start = int(np.searchsorted(a.time_s, first_s, side='left'))
+    stop = int(np.searchsorted(a.time_s, last_s, side='right'))
     msg = JointState(name=ANGLE_NAMES)
     pos = np.column_stack([a.theta1_rad[start:stop], a.theta3_rad[start:stop]]).tolist()
     vel = np.column_stack([a.omega1_radps[start:stop], a.omega3_radps[start:stop]]).tolist()
-    for i in range(stop - start):
-        t = int(log_ns[start + i])
+    for i, t in enumerate(_log_ns(a.time_s[start:stop], origin_s).tolist()):
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t, 1_000_000_000)
         msg.position, msg.velocity = pos[i], vel[i]
         bag.write_serialized(ANGLES_TOPIC, serialize_message(msg), t)
