@@ -250,8 +250,8 @@ def contract_topic(full_name: str, namespace: str = '/') -> Topic | None:
 class ParamSpec:
     """One parameter of a node: name, default, unit ('' for none), what it means, and its
     allowed range (inclusive) or choices. ``at_configure``: a device node applies it at
-    configure and refuses a change while configured. ``check`` raises ValueError with the
-    reason for a value a range cannot express."""
+    configure and refuses a change while configured. ``check`` raises InputError (or the
+    device's ConfigurationError) with the reason for a value a range cannot express."""
 
     name: str
     default: object
@@ -299,9 +299,10 @@ def _check_scene(value) -> None:
 
 
 def _check_overrides(items) -> None:
+    from mantis_sim.errors import InputError
     for item in items or []:
         if item and '=' not in item:
-            raise ValueError(f'override {item!r} is not key=value')
+            raise InputError(f'override {item!r} is not key=value')
 
 
 def _check_channel(value) -> None:

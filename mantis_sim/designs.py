@@ -122,7 +122,7 @@ def run_design(scene: Scene, values: dict) -> dict:
     started = time.perf_counter()
     try:
         result = simulate(scene.with_overrides([f'{k}={v!r}' for k, v in values.items()]))
-    except (SimulationError, ArithmeticError, ValueError) as exc:   # ParameterError too
+    except (SimulationError, InputError, ArithmeticError, ValueError) as exc:
         row.update(status=STATUS_FAILED, reason=f'{type(exc).__name__}: {exc}',
                    wall_time_s=time.perf_counter() - started,
                    design_time_s=time.perf_counter() - started)

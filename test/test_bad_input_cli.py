@@ -148,3 +148,49 @@ def test_a_bag_whose_marker_block_has_the_wrong_length(capsys, tmp_path, strike_
         return serialize_message(msg)
     bag = rewritten_copy(strike_bag, tmp_path / 'short_block_bag', short_block)
     refused(capsys, ['analyze', bag], bag, 'a malformed block on /camera/markers')
+
+
+# ------------------------------------------------- the two roots, caught once (issue 25)
+def test_bad_input_and_rig_faults_have_roots_of_their_own():
+    """InputError is not a ValueError (an `except ValueError` around a library call must not
+    swallow a refusal); the device and stack faults stand under RigFault, not under it."""
+    from mantis_rig import errors
+    from mantis_rig.analysis.tracking import TrackFormatError
+    from mantis_rig.hardware.interfaces import DeviceError
+    from mantis_rig.hardware.world_port import WorldTimeout
+    from mantis_rig.nodes.bringup import StackError
+    from mantis_rig.recording import BagClosedError, BagError, BagWriteError
+    from mantis_sim.errors import InputError
+    from mantis_sim.scene import SceneError
+
+    assert errors.InputError is InputError and not issubclass(InputError, ValueError)
+    for refusal in (TrackFormatError, BagError, SceneError):
+        assert issubclass(refusal, InputError) and not issubclass(refusal, errors.RigFault)
+    for fault in (DeviceError, errors.SafetyLimitError, errors.ConfigurationError, WorldTimeout,
+                  StackError, BagClosedError, BagWriteError):
+        assert issubclass(fault, errors.RigFault) and not issubclass(fault, (InputError,
+                                                                             ValueError))
+    assert DeviceError is errors.DeviceError and StackError is errors.StackError
+
+
+@pytest.mark.parametrize('raised, status', [
+    ('InputError', 2), ('DeviceError', 3), ('StackError', 3), ('BagClosedError', 3)])
+def test_mantis_says_each_error_in_one_line_with_its_exit_status(monkeypatch, capsys, raised,
+                                                                 status):
+    from mantis_rig import errors
+    from mantis_rig.cli import sim
+
+    def run_sim(args):
+        raise getattr(errors, raised)('the reason, named')
+
+    monkeypatch.setattr(sim, 'run_sim', run_sim)
+    assert cli_main(['sim', '--scene', 'air_23mm']) == status == (
+        errors.USAGE_ERROR if raised == 'InputError' else errors.RIG_FAULT)
+    captured = capsys.readouterr()
+    assert captured.out == '' and captured.err == 'mantis sim: the reason, named\n'
+
+
+def test_the_usage_exit_status_is_defined_once():
+    root = Path(__file__).resolve().parents[1] / 'mantis_rig'
+    defined = [p for p in root.rglob('*.py') if 'USAGE_ERROR = ' in p.read_text()]
+    assert defined == [root / 'errors.py'], defined

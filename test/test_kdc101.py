@@ -140,7 +140,7 @@ def test_explicit_scales_override_the_derived_ones():
                         velocity_per_mm_s=700000.0, acceleration_per_mm_s2=250.0)
     assert stage.scale.velocity_to_units(1 * MM) == 700000
     assert stage.scale.acceleration_to_units(2 * MM) == 500
-    with pytest.raises(ValueError, match='counts_per_mm'):
+    with pytest.raises(ConfigurationError, match='counts_per_mm'):
         AptScale(0.0)
 
 

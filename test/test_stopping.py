@@ -30,6 +30,7 @@ from mantis_rig.contract import (
     VELOCITY_COMMAND,
     resolve,
 )
+from mantis_rig.errors import RIG_FAULT
 from mantis_rig.nodes.bringup import Stack, StackConfig
 from mantis_rig.nodes.trial_client import TrialClient
 from mantis_rig.recording import BagReader, TruncatedBagWarning
@@ -209,7 +210,7 @@ def test_a_node_process_killed_by_its_own_signal_aborts_the_trial(trial):
     os.kill(rig, signal.SIGTERM)
     status = run.wait(timeout_s=60.0)
     stderr = '\n'.join(run.stderr)
-    assert status == 1, stderr
+    assert status == RIG_FAULT, stderr
     assert 'Traceback' not in stderr, stderr
     ours = [line for line in run.stderr if line.startswith('mantis trial: ')]
     assert len(ours) == 1 and 'sim_rig (exit 143)' in ours[0], stderr
@@ -269,7 +270,7 @@ def test_a_full_disk_mid_pull_stops_the_stage_and_keeps_what_was_written(tmp_pat
     assert 'pulling' in [m.message.data for m in messages if m.topic == resolve(SUPERVISOR_STATE)]
 
 
-def test_mantis_trial_exits_1_with_one_line_when_the_log_cannot_be_written(trial):
+def test_mantis_trial_exits_3_with_one_line_when_the_log_cannot_be_written(trial):
     """The same from the command line, the write error real: the process may write files of
     at most 40 kB (RLIMIT_FSIZE), so the bag's file fails with EFBIG early in the trial."""
     def small_files():
@@ -278,7 +279,7 @@ def test_mantis_trial_exits_1_with_one_line_when_the_log_cannot_be_written(trial
     run = trial('single', preexec_fn=small_files)
     status = run.wait(timeout_s=120.0)
     stderr = '\n'.join(run.stderr)
-    assert status == 1, stderr
+    assert status == RIG_FAULT, stderr      # a rig fault: the log could not be written
     assert 'Traceback' not in stderr, stderr
     ours = [line for line in run.stderr if line.startswith('mantis trial: ')]
     assert len(ours) == 1, stderr

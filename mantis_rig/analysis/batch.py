@@ -17,7 +17,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import BrokenExecutor, ProcessPoolExecutor, as_completed
 import csv
 import math
 import os
@@ -74,13 +74,13 @@ def analyse_trial(trial, given: dict | None = None) -> tuple:
     last = float(tracks.time_s[-1])
     try:
         params, sources = params_for_trial(trial.conditions, given=given or {})
-    except ValueError as exc:          # ConditionError: a condition out of range
+    except InputError as exc:          # ConditionError (a condition out of range), SceneError
         raise TrialRefused(str(exc)) from exc
     if trial.force_N is not None:
         params.tendon_force_N, params.tendon_force_time_s = trial.force_N, trial.force_time_s
     try:
         analysis = analyze_tracks(tracks, params)
-    except (ValueError, IndexError) as exc:
+    except (InputError, ValueError, IndexError) as exc:    # refused, or no fit on these data
         raise TrialRefused(
             f'not enough data before the damage: the data end at t = {last:.4f} s: {exc}'
             if trial.truncated else f'analysis failed: {exc}') from exc
@@ -194,7 +194,7 @@ def analyse_one(path, given: dict | None = None, frame_rate_hz: float | None = N
             trial = load_trial_input(path, frame_rate_hz, length_unit)
             stage = 'analysis'
             row = _analyse(path, trial, given or {}, notes)
-        except Exception as exc:   # one trial's failure, whatever it is, never stops the batch
+        except Exception as exc:  # noqa: BLE001 - the batch's boundary: a trial's failure, whatever it is, is its row (named), never the batch's end
             row = _row(path, status=REFUSED, reason=_reason(exc, stage),
                        **_what_was_read(path, trial))
     for w in caught:
@@ -235,7 +235,7 @@ def _reason(exc: Exception, stage: str) -> str:
     text = str(exc) or type(exc).__name__
     if isinstance(exc, (TrackFormatError, BagError, OSError)):
         return text
-    if isinstance(exc, ValueError):
+    if isinstance(exc, (InputError, ValueError)):
         return f'{stage}: {text}'
     return f'unexpected {type(exc).__name__} in {stage}: {text}'
 
@@ -274,7 +274,7 @@ def run_batch(trials: list, given: dict | None = None, frame_rate_hz: float | No
             i = futures[future]
             try:
                 rows[i] = future.result()
-            except Exception as exc:  # the worker process itself died (BrokenProcessPool)
+            except BrokenExecutor as exc:  # the worker process itself died (BrokenProcessPool)
                 rows[i] = _row(trials[i], trial_name(trials[i]), REFUSED,
                                f'the analysing process died ({type(exc).__name__}: {exc})')
             done(rows[i])

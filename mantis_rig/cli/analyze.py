@@ -6,8 +6,8 @@ import math
 from pathlib import Path
 import sys
 
+from ..errors import InputError
 from .options import (
-    USAGE_ERROR,
     add_condition_options,
     add_export_options,
     err,
@@ -89,14 +89,12 @@ def _analyze_one(args) -> int:
     bag = is_bag_path(args.path)
     options = export_options(args)
     if bag and any(v is not None for v in options.values()):
-        err('analyze', f'{args.path} is a bag: --frame-rate and --length-unit apply to '
-                        'tracking files only (a bag states its own)')
-        return USAGE_ERROR
+        raise InputError(f'{args.path} is a bag: --frame-rate and --length-unit apply to '
+                         'tracking files only (a bag states its own)')
     try:
         trial = load_trial_input(args.path, **options)
     except OSError as exc:
-        err('analyze', exc)
-        return USAGE_ERROR
+        raise InputError(f'{args.path}: {exc}') from exc
     if trial.problems:
         err('analyze', f'warning: {args.path} is damaged: {"; ".join(trial.problems)}')
         err('analyze', f'warning: analysing the {trial.tracks.n_frames} frames recorded '
@@ -123,31 +121,26 @@ def run_analyze_batch(args) -> int:
     from ..analysis.batch import Progress, expand_paths, is_bag_dir, run_batch, write_table
 
     if args.json or args.plot:
-        err('analyze', '--json and --plot apply to one trial; a batch (several paths or '
-                        '--table) writes its table (--table FILE.csv, or - for stdout)')
-        return USAGE_ERROR
+        raise InputError('--json and --plot apply to one trial; a batch (several paths or '
+                         '--table) writes its table (--table FILE.csv, or - for stdout)')
     given = given_conditions(args)
     table = args.table if args.table is not None else '-'
     to_stdout = table == '-'
     if not to_stdout and not Path(table).resolve().parent.is_dir():
-        err('analyze', f'--table {table}: no such directory {Path(table).parent}')
-        return USAGE_ERROR
+        raise InputError(f'--table {table}: no such directory {Path(table).parent}')
     if not to_stdout and Path(table).is_dir():
-        err('analyze', f'--table {table} is a directory: name the CSV file to write')
-        return USAGE_ERROR
+        raise InputError(f'--table {table} is a directory: name the CSV file to write')
     trials, notes = expand_paths(args.paths, exclude=() if to_stdout else (table,))
     for note in notes:
         err('analyze', f'warning: {note}')
     if not trials:
-        err('analyze', 'no trials to analyse')
-        return USAGE_ERROR
+        raise InputError('no trials to analyse')
     options = export_options(args)
     if any(v is not None for v in options.values()):
         bags = [str(t) for t in trials if t.suffix == '.mcap' or is_bag_dir(t)]
         if bags:
-            err('analyze', f'--frame-rate and --length-unit apply to tracking files only; '
-                            f'these are bags (a bag states its own): {", ".join(bags)}')
-            return USAGE_ERROR
+            raise InputError(f'--frame-rate and --length-unit apply to tracking files only; '
+                             f'these are bags (a bag states its own): {", ".join(bags)}')
     progress = Progress(len(trials))
     try:
         rows = run_batch(trials, given, jobs=args.jobs, on_done=progress, **options)

@@ -168,7 +168,7 @@ def check_ros_environment(report: Report, env=None) -> None:
     try:
         from rclpy.utilities import get_rmw_implementation_identifier
         loaded = get_rmw_implementation_identifier()
-    except Exception as exc:   # rclpy or the middleware library is missing or broken
+    except Exception as exc:  # noqa: BLE001 - a diagnosis: whatever loading rclpy's middleware raises is the finding, reported FAIL
         report.add('ros: middleware', FAIL, f'rclpy cannot load the middleware '
                    f'{rmw or "(default)"}: {" ".join(str(exc).split())}',
                    'reinstall with ./scripts/bootstrap.sh, or export '
@@ -373,7 +373,7 @@ def check_loadcell(report: Report, options: Options, rig, view) -> bool:
         entry = next(d for d in view.listing.devices if d.name == params.channel.split('/')[0])
         try:
             view.device.self_test_device()
-        except Exception as exc:   # any DAQmx error: the device failed its self-test
+        except Exception as exc:  # noqa: BLE001 - a diagnosis: any error of the self-test is the finding, reported FAIL
             report.add(f'{name}: channel', FAIL, f'{entry} failed its self-test: '
                        f'{_one_line(exc)}', 'reset the device in NI MAX, reconnect it and '
                        'run its self-test there')
@@ -691,7 +691,7 @@ class _ForceFeed:
                 self.guard.observe_force(block)
                 self.blocks += 1
                 self.first.set()
-        except Exception as exc:   # any failure of the feed: the stage must not pull blind
+        except Exception as exc:  # noqa: BLE001 - the feed thread's boundary: on any failure the stage must stop, not pull blind
             self.error = _one_line(exc)
             try:
                 self.guard.stop()
@@ -706,13 +706,13 @@ class _ForceFeed:
             self._thread.join(timeout=10.0)
         try:
             self.daq.stop()
-        except Exception:   # the DAQ may be gone: closing below is what matters
+        except Exception:  # noqa: BLE001 - a cleanup path: the DAQ may be gone, closing below is what matters
             pass
         self.daq.close()
 
 
 def _check_motion(report: Report, options: Options, rig, stage, loadcell_ok: bool) -> None:
-    from ..hardware.interfaces import DeviceError, StageGuard
+    from ..hardware.interfaces import ConfigurationError, DeviceError, StageGuard
     name = 'stage: motion'
     params = options.params
     if not loadcell_ok:
@@ -747,7 +747,7 @@ def _check_motion(report: Report, options: Options, rig, stage, loadcell_ok: boo
                 raise DeviceError(f'asked for {goal * 1e3:.3f} mm, the stage rests at '
                                   f'{at * 1e3:.4f} mm')
             steps.append(f'{at * 1e3:.3f} mm')
-    except (DeviceError, ValueError) as exc:
+    except (DeviceError, ConfigurationError, ValueError) as exc:
         cause = f'the load cell failed during the move ({feed.error})' if feed.error else \
             _one_line(exc)
         report.add(name, FAIL, f'{", ".join(steps) or "nothing done"}; then {cause}; '

@@ -1,8 +1,8 @@
 """`mantis import-tracking`: tracked video (CSV / .xlsx) -> trial bag."""
 from __future__ import annotations
 
+from ..errors import InputError
 from .options import (
-    USAGE_ERROR,
     add_condition_options,
     add_export_options,
     err,
@@ -12,21 +12,21 @@ from .options import (
 
 
 def run_import(args) -> int:
-    from ..analysis import analyze_tracks, load_tracks
-    from ..analysis.conditions import params_for_trial
+    from ..analysis import load_tracks
+    from ..analysis.bag_input import TrialInput
+    from ..analysis.batch import TrialRefused, analyse_trial
     from ..analysis.tracking_import import write_tracking_bag
 
     given = given_conditions(args)
     try:
         tracks = load_tracks(args.file, **export_options(args))
     except OSError as exc:
-        err('import-tracking', f'{args.file}: {exc}')
-        return USAGE_ERROR
+        raise InputError(f'{args.file}: {exc}') from exc
     analysis = None
     if not args.no_angles:
         try:
-            analysis = analyze_tracks(tracks, params_for_trial({}, given=given)[0])
-        except (ValueError, IndexError) as exc:
+            analysis = analyse_trial(TrialInput(tracks=tracks), given)[0]   # as `analyze` does
+        except TrialRefused as exc:    # the analysis refused the frames: keep the raw data
             err('import-tracking', f'warning: θ1/θ3 not derived ({exc}); writing the '
                                     'marker frames only')
     try:

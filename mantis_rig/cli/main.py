@@ -4,15 +4,26 @@ from __future__ import annotations
 import argparse
 import sys
 
-from mantis_sim.errors import InputError
 from mantis_sim.model import SimulationError
 
+from ..errors import RIG_FAULT, USAGE_ERROR, InputError, RigFault
 from . import analyze, doctor, import_tracking, recover, replay, sim, sweep, trial
-from .options import USAGE_ERROR
+
+EXIT_STATUSES = f"""exit status:
+  0    done
+  1    the command ran but its result is a failure: a trial that did not end 'done', a
+       refused trial in a batch, a simulation that could not be integrated
+  {USAGE_ERROR}    bad input: an option, a file, a scene or a value that cannot be used (one line
+       names it)
+  {RIG_FAULT}    a rig fault: a device or the node stack failed (one line names it; the stage
+       was stopped first)
+  130  interrupted (Ctrl-C), 143 terminated: the stage stopped and the log closed
+"""
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog='mantis', description=__doc__)
+    parser = argparse.ArgumentParser(prog='mantis', description=__doc__, epilog=EXIT_STATUSES,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     commands = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
     sim.add_commands(commands)
     replay.add_commands(commands)
@@ -26,16 +37,26 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    """Run one command; the one place where its errors become a line and an exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         return args.run(args) or 0
     except InputError as exc:     # bad input, named in the message: one line, no traceback
-        print(f'mantis {args.command}: {exc}', file=sys.stderr)
+        _say(f'mantis {args.command}: {exc}')
         return USAGE_ERROR
+    except RigFault as exc:       # the device's or the stack's own words; the stage is stopped
+        _say(f'mantis {args.command}: {exc}')
+        return RIG_FAULT
     except SimulationError as exc:
-        print(f'mantis {args.command}: simulation failed: {exc}', file=sys.stderr)
+        _say(f'mantis {args.command}: simulation failed: {exc}')
         return 1
+
+
+def _say(line: str) -> None:
+    """One line on stderr in one write (node threads or processes may write there too)."""
+    sys.stderr.write(line + '\n')
+    sys.stderr.flush()
 
 
 if __name__ == '__main__':

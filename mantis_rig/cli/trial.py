@@ -8,6 +8,7 @@ import sys
 import time
 
 from ..contract import SUPERVISOR_NODE
+from ..errors import RIG_FAULT, USAGE_ERROR
 from ..trial.conditions import (
     BACKENDS,
     PARAMETERS,
@@ -16,12 +17,17 @@ from ..trial.conditions import (
     check_value,
 )
 
-USAGE_ERROR = 2
 PROCESSES = ('single', 'multi')
+STACK_EXIT_STATUSES = (
+    f"exit status: 0 done; 1 the trial did not end 'done' (aborted: the reason is in its "
+    f"bag); {USAGE_ERROR} bad input (an option, a scene, a parameter); {RIG_FAULT} a rig fault: "
+    f"a device or the node stack failed (a node process died, the log could not be written), "
+    f"named in one line, the stage stopped first; 130 / 143 interrupted by SIGINT / SIGTERM")
 
 
 def add_commands(commands) -> None:
-    trial = commands.add_parser('trial', help='run one trial on the node stack and log it')
+    trial = commands.add_parser('trial', help='run one trial on the node stack and log it',
+                                epilog=STACK_EXIT_STATUSES)
     _stack_arguments(trial)
     trial.add_argument('--out', type=Path, required=True,
                        help='directory under which the trial gets its bag directory')
@@ -32,7 +38,8 @@ def add_commands(commands) -> None:
     trial.set_defaults(run=run_trial)
 
     bringup = commands.add_parser('bringup', help='start the node stack and wait for service '
-                                  'calls (/supervisor/start_trial) until Ctrl-C')
+                                  'calls (/supervisor/start_trial) until Ctrl-C',
+                                  epilog=STACK_EXIT_STATUSES)
     _stack_arguments(bringup)
     bringup.add_argument('--out', type=Path, default=Path('trials'),
                          help='directory for the trials\' bags (default trials/)')
@@ -117,11 +124,7 @@ def stack_config(args):
 
 
 def _ros_session(run, args) -> int:
-    try:
-        config = stack_config(args)
-    except ConditionError as exc:
-        print(f'mantis {args.command}: {exc}', file=sys.stderr)
-        return USAGE_ERROR
+    config = stack_config(args)      # InputError: cli.main says what is wrong, exit 2
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
@@ -174,7 +177,7 @@ def _trial(config, args, signals) -> int:
     except StopRequested as stop:
         run.reason = stop.reason
     except StackError as exc:
-        run.error = str(exc)
+        run.error = exc
         if run.started:
             client.call('abort', timeout_s=5.0)
             client.wait_for_end(10.0)
@@ -190,9 +193,8 @@ def _trial(config, args, signals) -> int:
         where = f'log closed: {run.bag}' if run.bag else 'no trial had started'
         say(f'mantis trial: {signals.first.reason}: stage stopped; {where}')
         return signals.first.exit_status
-    if run.error:
-        say(f'mantis trial: {run.error}')
-        return 1
+    if run.error is not None:
+        raise run.error       # stage stopped, log closed: cli.main says it in one line, exit 3
     print(format_summary(summarize(run.bag), with_path=False))
     return 0 if run.final == 'done' else 1
 
@@ -215,7 +217,7 @@ class _TrialRun:
         self.started = False
         self.bag: Path | None = None
         self.final: str | None = None
-        self.error = ''
+        self.error: Exception | None = None      # the StackError that ended the trial
         self.reason = ''
 
     def follow(self, client, stack, timeout_s: float, stopping=lambda: False) -> None:
@@ -285,13 +287,12 @@ def _wait_closed(bag: Path, timeout_s: float, failed=lambda: False) -> bool:
 
 
 def _bringup(config, args, signals) -> int:
-    from ..nodes.bringup import Stack
+    from ..nodes.bringup import Stack, StackError
     from ..nodes.stopping import StopRequested, say
 
     relay = _live_relay(args)
     stack = Stack(config, log_dir=args.log_dir)
     signals.emergency_stop = stack.emergency_stop
-    status = 0
     try:
         stack.start()
         if relay is not None and stack.rig is not None:
@@ -302,10 +303,8 @@ def _bringup(config, args, signals) -> int:
               f'Ctrl-C to stop', flush=True)
         while True:
             dead = stack.dead_processes()
-            if dead:
-                print(f'mantis bringup: node process(es) ended: {dead}', file=sys.stderr)
-                status = 1
-                break
+            if dead:        # the stack is stopped below; cli.main says it in one line, exit 3
+                raise StackError(f'node process(es) ended: {dead}')
             time.sleep(0.5)
     except StopRequested:
         pass
@@ -318,7 +317,7 @@ def _bringup(config, args, signals) -> int:
     if signals.first is not None:
         say(f'mantis bringup: {signals.first.reason}: stage stopped, nodes ended')
         return signals.first.exit_status
-    return status
+    return 0
 
 
 __all__ = ['add_commands', 'stack_config']

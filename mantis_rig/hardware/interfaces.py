@@ -17,24 +17,15 @@ from typing import Optional, Union
 
 import numpy as np
 
+# the device faults, under mantis_rig.errors.RigFault; imported from here by the backends
+from ..errors import ConfigurationError, DeviceError, SafetyLimitError
+
 log = logging.getLogger(__name__)
 
 # The rig's hardware envelope (shared/docs/rig.md): no configuration may go beyond it.
 STAGE_TRAVEL_M = 25e-3                 # MTS25/M-Z8 travel, 0 at the home (reverse) end
 STAGE_MAX_SPEED_M_PER_S = 2.4e-3       # MTS25/M-Z8 maximum speed
 LOADCELL_CAPACITY_N = 111.0            # Futek LSB302, 25 lb
-
-
-class DeviceError(RuntimeError):
-    """A device refused, timed out, replied with garbage or vanished. The message says which."""
-
-
-class ConfigurationError(ValueError):
-    """A setting is outside what the device or the rig's safety limits allow."""
-
-
-class SafetyLimitError(DeviceError):
-    """A safety limit (travel, speed, force ceiling) stopped the device."""
 
 
 class Device(abc.ABC):

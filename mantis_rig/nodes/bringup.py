@@ -33,6 +33,7 @@ from rclpy.parameter import Parameter
 import yaml
 
 from mantis_rig.contract import CLOCK, FORCE_CEILING_NAME, FORCE_GUARD_NODES, resolve
+from mantis_rig.errors import StackError
 
 from .executors import STACK_PARENT_ENV, Spinner, light_executor, threaded_executor
 from .node_table import DEVICES, SIM_RIG_PROCESS, STAGE_NODE, SUPERVISOR, WORLD
@@ -108,10 +109,6 @@ class StackConfig:
     @property
     def stage_process(self) -> str:
         return SIM_RIG_PROCESS if self.sim else STAGE_NODE
-
-
-class StackError(RuntimeError):
-    """A node of the stack could not be started or has died."""
 
 
 def _overrides(values: dict) -> list:

@@ -42,6 +42,7 @@ from rclpy.parameter import Parameter
 
 from mantis_rig import contract
 from mantis_rig.contract import DEVICE_COMMON_PARAMETERS, ParamSpec
+from mantis_rig.errors import ConfigurationError, InputError
 from mantis_rig.hardware.backends import check_backend
 from mantis_rig.hardware.interfaces import DeviceError
 
@@ -209,7 +210,7 @@ class DeviceNode(WithoutDefaultEventHandlers, LifecycleNode):
             with self._fault_lock:
                 self._fault = f'activate: {exc}'
             return TransitionCallbackReturn.ERROR
-        except Exception as exc:      # noqa: BLE001
+        except Exception as exc:      # noqa: BLE001 - a transition's boundary: any failure is ERROR with its reason
             self.stop_streaming()
             reason = f'activate failed: {exc}'
             self.get_logger().error(reason)
@@ -294,6 +295,6 @@ class DeviceNode(WithoutDefaultEventHandlers, LifecycleNode):
             if spec.check is not None:
                 try:
                     spec.check(param.value)
-                except ValueError as exc:
+                except (InputError, ConfigurationError) as exc:
                     return SetParametersResult(successful=False, reason=f'{param.name}: {exc}')
         return SetParametersResult(successful=True)

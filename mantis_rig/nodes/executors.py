@@ -29,12 +29,12 @@ from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
 from mantis_rig.contract import side_node_name
+from mantis_rig.errors import USAGE_ERROR, ConfigurationError, InputError
 from mantis_rig.nodes.ros_env import claim_local_domain
 
 from .lean_node import LeanNode
 from .stopping import StopRequested, StopSignals, watch_parent
 
-USAGE_ERROR = 2
 NODE_THREADS = 4        # a device node process: its blocking services and backend waits
 
 
@@ -152,7 +152,7 @@ def run_node(node_class, args=None, make_executor=None) -> int:
     try:
         try:
             node = node_class()
-        except (ValueError, InvalidParameterValueException) as exc:
+        except (InputError, ConfigurationError, InvalidParameterValueException) as exc:
             print(f'{node_class.__name__}: {exc}', file=sys.stderr)
             return USAGE_ERROR
         signals.raise_if_stopped()

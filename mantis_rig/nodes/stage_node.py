@@ -156,7 +156,7 @@ class StageNode(DeviceNode):
             return
         try:
             trip = stage.observe_force(force_block_from_msg(msg).force_n)
-        except (DeviceError, ValueError) as exc:
+        except (DeviceError, ValueError) as exc:    # a malformed block: force_block's own
             self.fault(f'force guard: {exc}')
             return
         if trip is not None:

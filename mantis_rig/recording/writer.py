@@ -21,6 +21,7 @@ import time
 from mcap.writer import CompressionType, Writer
 from rclpy.serialization import serialize_message
 
+from ..errors import BagClosedError
 from .bag_metadata import (
     ROSBAG2_RECORD_KEY,
     ROSBAG2_RECORD_NAME,
@@ -45,10 +46,6 @@ DEFAULT_CHUNK_SIZE_BYTES = 256 * 1024
 DEFAULT_SYNC_PERIOD_S = 0.5
 COMPRESSIONS = {'none': CompressionType.NONE, 'lz4': CompressionType.LZ4,
                 'zstd': CompressionType.ZSTD}
-
-
-class BagClosedError(RuntimeError):
-    """The bag was written to after close()."""
 
 
 class BagWriteError(BagClosedError):
