@@ -516,3 +516,23 @@ def test_a_tracking_file_with_gaps_is_imported_and_analysed_as_directly(capsys, 
     assert code == 0
     for key in ('peak_tip_speed_mps', 'max_spring_energy_mJ', 'L1_mm', 'peak_tip_speed_s'):
         assert from_bag[key] == pytest.approx(direct[key], rel=1e-9), key
+
+
+def test_a_bag_whose_scene_cannot_be_loaded_is_refused_unless_the_geometry_is_given(
+        imported_bag, capsys, tmp_path):
+    """Issue 25: a bag naming a scene that could not be loaded was analysed with the default
+    geometry, spring and inertia, silently. It is refused, naming the bag, the scene and why;
+    given d_t and the contact angle, it is analysed, and the output says what was assumed."""
+    bag = rewritten_copy(imported_bag, tmp_path / 'unknown_scene',
+                         conditions={'scene': 'no_such_scene'})
+    code, out, err = run(capsys, 'analyze', bag)
+    assert code == 2 and out == ''
+    assert err.count('\n') == 1 and err.startswith(f'mantis analyze: {bag}: ')
+    assert "scene 'no_such_scene', which cannot be loaded" in err
+    assert '--d-t-mm and --contact-angle-deg' in err
+    code, out, err = run(capsys, 'analyze', bag, '--json', '--d-t-mm', 23,
+                         '--contact-angle-deg', 3)
+    assert code == 0, err
+    assumed = json.loads(out)['input']['parameters']
+    assert any("scene 'no_such_scene' could not be loaded" in note and 'assumed' in note
+               for note in assumed), assumed

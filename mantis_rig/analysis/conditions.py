@@ -2,18 +2,31 @@
 
 A bag recorded by the supervisor names the scene it was run with (simulated rig) and the
 conditions set for the trial: the tendon guide distance ``d_t_mm`` and the contact angle
-``contact_angle_deg`` (the shim, measured on the rig). The scene, if mantis_sim knows it,
-gives the mechanism's geometry, spring, inertia and the camera's view; the conditions, which
-are what the trial was run with, override the scene's d_t and contact angle. A bag without
-them (an imported tracking file) keeps the physics.md reference values of AnalysisParams.
+``contact_angle_deg`` (the shim, measured on the rig). The scene gives the mechanism's
+geometry, spring, inertia and the camera's view; the conditions, which are what the trial was
+run with, override the scene's d_t and contact angle. A bag without them (an imported tracking
+file) keeps the physics.md reference values of AnalysisParams. A bag naming a scene that
+cannot be loaded here is refused (InputError), unless the user gives d_t and the contact
+angle: then the reference values are used, and the analysis's parameter notes say so.
 """
 from __future__ import annotations
 
 from dataclasses import replace
 import math
 
+from mantis_sim.errors import InputError
+
 from .energy import InertiaParams
 from .report import AnalysisParams
+
+#: Trial conditions a tracking file does not carry, given on the command line (the rig's
+#: bags carry them in ``trial_conditions``): trial condition -> option. Both given is what it
+#: takes to analyse a bag whose scene cannot be loaded.
+CONDITION_OPTIONS = {'d_t_mm': '--d-t-mm', 'contact_angle_deg': '--contact-angle-deg'}
+
+
+def _gives_geometry(given: dict | None) -> bool:
+    return all(_number(given or {}, key) is not None for key in CONDITION_OPTIONS)
 
 
 def _number(conditions: dict, key: str) -> float | None:
@@ -28,7 +41,7 @@ def _check_ranges(values: dict, source: str) -> None:
     """The conditions the analysis uses, against the ranges the command line and the
     supervisor enforce (one source: trial.conditions); ConditionError names the value."""
     from mantis_rig.trial.conditions import ConditionError, check_value
-    for key in ('d_t_mm', 'contact_angle_deg'):
+    for key in CONDITION_OPTIONS:
         raw = values.get(key)
         if raw is None or raw == '':
             continue
@@ -42,15 +55,14 @@ def _check_ranges(values: dict, source: str) -> None:
 
 
 def scene_of(conditions: dict):
-    """The mantis_sim scene the trial names, or None (no scene, or one mantis_sim lacks)."""
+    """The mantis_sim scene the trial names, or None if it names none. A scene that cannot be
+    loaded (unknown here, or broken) is the InputError that says why: analysing the trial
+    with another geometry, spring and inertia than its own would give wrong numbers."""
     name = str(conditions.get('scene') or '')
     if not name:
         return None
-    try:
-        from mantis_sim.scene import load_scene
-        return load_scene(name)
-    except Exception:               # a rig description, an unknown or broken scene
-        return None
+    from mantis_sim.scene import load_scene
+    return load_scene(name)
 
 
 def params_for_trial(conditions: dict, params: AnalysisParams | None = None,
@@ -63,7 +75,19 @@ def params_for_trial(conditions: dict, params: AnalysisParams | None = None,
     """
     params = params or AnalysisParams()
     notes = []
-    scene = scene_of(conditions)
+    try:
+        scene = scene_of(conditions)
+    except InputError as exc:
+        if not _gives_geometry(given):
+            raise InputError(
+                f'its trial conditions name scene {conditions.get("scene")!r}, which cannot '
+                f'be loaded here ({exc}); its geometry, spring and inertia are unknown: give '
+                f'{" and ".join(CONDITION_OPTIONS.values())} to analyse it with physics.md\'s '
+                f'reference values and these') from exc
+        scene = None
+        notes.append(f'scene {conditions.get("scene")!r} could not be loaded ({exc}): '
+                     f'assumed the physics.md reference geometry, spring and inertia, '
+                     f'with the given d_t and contact angle')
     if scene is not None:
         g = scene.geometry
         params = replace(

@@ -1,12 +1,10 @@
-"""What several commands share: the usage exit status, one-line errors, the trial-condition
-options and the options for what a tracker export leaves out."""
+"""What several commands share: one-line errors, the trial-condition options and the options
+for what a tracker export leaves out."""
 from __future__ import annotations
 
 import argparse
 import math
 import sys
-
-USAGE_ERROR = 2
 
 
 def err(command, text):
@@ -14,11 +12,6 @@ def err(command, text):
 
 
 # ------------------------------------------------------------- trial conditions, by hand
-#: Trial conditions a tracking file does not carry, given on the command line (the rig's
-#: bags carry them in ``trial_conditions``): trial condition -> option.
-CONDITION_OPTIONS = {'d_t_mm': '--d-t-mm', 'contact_angle_deg': '--contact-angle-deg'}
-
-
 def add_condition_options(parser) -> None:
     parser.add_argument('--d-t-mm', type=float, metavar='MM',
                         help='tendon guide distance d_t of the trial (default: the bag\'s '
@@ -72,6 +65,7 @@ def export_options(args) -> dict:
 
 def given_conditions(args) -> dict:
     """The trial conditions given as options, checked against their ranges (ConditionError)."""
+    from ..analysis.conditions import CONDITION_OPTIONS
     from ..trial.conditions import ConditionError, check_value
 
     given = {}

@@ -72,7 +72,7 @@ class WorldRunner:
                         wall0, sim0 = time.monotonic(), self.world.time_s
                 else:
                     time.sleep(0)             # let the backends' threads in
-        except BaseException as exc:         # the world is broken: tell every waiter
+        except BaseException as exc:  # noqa: BLE001 - the world thread's boundary: its failure goes to every waiter
             with self.lock:
                 self.failure = exc
                 self.lock.notify_all()

@@ -138,5 +138,5 @@ def close_quietly(task) -> None:
         return
     try:
         task.close()
-    except Exception as exc:   # nothing more can be done for this task
+    except Exception as exc:  # noqa: BLE001 - a cleanup path: the device may be gone; logged
         log.warning('closing DAQmx task failed: %s', ' '.join(str(exc).split()))

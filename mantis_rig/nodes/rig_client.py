@@ -107,7 +107,7 @@ class RigClient:
         def done(future):
             try:
                 pending.set(answer(future.result()))
-            except Exception as exc:   # the call failed in the client library
+            except Exception as exc:  # noqa: BLE001 - a callback's boundary: any failure of the call is its (False, reason) answer
                 pending.set((False, f'{self._full_name(client)}: {exc}'))
         client.call_async(request).add_done_callback(done)
         return pending

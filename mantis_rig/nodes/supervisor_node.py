@@ -240,7 +240,7 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
         array.header.stamp = self.get_clock().now().to_msg()
         try:
             self._diagnostics_pub.publish(array)
-        except Exception:      # shutting down
+        except RuntimeError:   # shutting down: rclpy's InvalidHandle / RCLError (its context gone)
             pass
 
     # ------------------------------------------------------------------ observations

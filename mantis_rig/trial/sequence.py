@@ -255,7 +255,7 @@ class TrialSequence:
             return self._finish('done', 'completed', '')
         except TrialAborted:
             return self._finish('aborted', 'aborted', self.reason)
-        except Exception as exc:        # a bug must still stop the stage and close the log
+        except Exception as exc:  # noqa: BLE001 - the trial thread's boundary: a bug must still stop the stage and close the log (its name is the abort reason)
             self.abort(f'supervisor error: {type(exc).__name__}: {exc}')
             return self._finish('aborted', 'aborted', self.reason)
 
