@@ -29,7 +29,7 @@ from .scene import Scene, load_scene
 STATUS_OK, STATUS_NO_STRIKE, STATUS_FAILED = 'ok', 'no strike', 'failed'
 ID_COLUMN = 'design_id'
 METRIC_KEYS = tuple(k for k in JSON_KEYS if k not in ('effects', 'solver', 'rtol',
-                                                      'wall_time_s'))
+                                                      'wall_time_s', 'status', 'reason'))
 EXTRA_METRICS = ('peak_time_s', 'peak_arm_speed_radps', 'peak_body_speed_in_strike_radps',
                  'arm_kinetic_energy_share_at_peak', 'tendon_work_phase_IV_mJ')
 
@@ -134,8 +134,7 @@ def run_design(scene: Scene, values: dict) -> dict:
     if metrics['strike_reached']:
         row.update(status=STATUS_OK, reason='')
     else:
-        row.update(status=STATUS_NO_STRIKE,
-                   reason='the arm never struck: the pull did not release it')
+        row.update(status=STATUS_NO_STRIKE, reason=metrics['reason'])
     row['design_time_s'] = time.perf_counter() - started
     return row
 

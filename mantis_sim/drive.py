@@ -25,6 +25,10 @@ class ConstantPull:
     def breakpoints(self) -> list[float]:
         return []
 
+    def time_to_pull(self, distance_mm: float) -> float:
+        """When (ms) the stage has pulled distance_mm; inf if it never does."""
+        return distance_mm / self.v if self.v > 0 else math.inf
+
 
 class RampedPull:
     """Effect stage_profile: the commanded velocity ramps up at a constant acceleration, and the
@@ -65,6 +69,22 @@ class RampedPull:
 
     def breakpoints(self) -> list[float]:
         return [self.t_ramp] if self.t_ramp > 0 else []
+
+    def time_to_pull(self, distance_mm: float) -> float:
+        """When (ms) the stage has pulled distance_mm (pulled(t) only grows: bisection)."""
+        if self.v <= 0:
+            return math.inf
+        hi = max(self.t_ramp, 1.0) + self.tau + distance_mm / self.v
+        while self.pulled(hi)[0] < distance_mm:
+            hi *= 2.0
+        lo = 0.0
+        for _ in range(100):
+            mid = 0.5 * (lo + hi)
+            if self.pulled(mid)[0] < distance_mm:
+                lo = mid
+            else:
+                hi = mid
+        return hi
 
 
 def make_drive(scene: Scene):

@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import math
 import time
+from typing import Optional
 
 import numpy as np
 
@@ -40,15 +41,24 @@ GRAZING_TIME_MS = 0.1
 # (a stop at the unlatching instant left the arm latched for good).
 UNLATCH_TORQUE_TOL_NMM = 1e-9
 MAX_EVENTS_AT_ONE_INSTANT = 12
+# With the stage still (pull speed 0) and no time given, a run simulates this much of the
+# mechanism's own motion: a released arm settles within milliseconds, a latched one never moves.
+STILL_STAGE_HORIZON_MS = 1000.0
 MIN_SPAN_MS = 1e-9
 STATE_SCALE = (1.0, 1.0, 1.0, 1.0, 100.0, 100.0)   # rad, rad, rad/ms, rad/ms, mJ, mJ
 
 
 @dataclass
 class Mode:
-    latched: bool
+    latched: bool                 # the arm held still on the body: at the contact, or stuck
     taut: bool
     saturated: bool = False       # a taut rigid tendon yielding at its saturation tension
+    # pivot_friction: the arm stuck at this theta3 away from the contact (None: at the contact)
+    stuck_at: Optional[float] = None
+    slip: float = 1.0             # pivot_friction: the way a free arm starts to move (w3 = 0)
+
+    def copy(self) -> Mode:
+        return Mode(self.latched, self.taut, self.saturated, self.stuck_at, self.slip)
 
 
 @dataclass
@@ -62,6 +72,8 @@ class Segment:
     states: np.ndarray            # columns: th1, th3, w1, w3, W_drive, E_dissipated
     dense: object = None          # callable t -> full state row, if dense output was asked
     saturated: bool = False
+    stuck_at: Optional[float] = None
+    slip: float = 1.0
 
 
 @dataclass
@@ -75,6 +87,7 @@ class RawRun:
     wall_time_s: float = 0.0
     energy0_mJ: float = 0.0
     solver_steps: int = 0
+    end_reason: str = ''          # why a run ended without a strike ('' if it struck)
 
 
 class HybridSimulator:
@@ -83,7 +96,7 @@ class HybridSimulator:
         self.model = Model(scene)
         integ = scene.integration
         self.method, self.rtol, self.atol_scale = integ.solver, integ.rtol, integ.atol_scale
-        self.t_end = integ.t_end_s * 1e3
+        self.t_end, self._horizon_reason = self._horizon(scene)
         self.post_peak = integ.post_peak_ms
         self.dense = dense
         self.separation = max(SEPARATION, self.rtol * self.model.mech.d_t)
@@ -97,12 +110,32 @@ class HybridSimulator:
         from scipy.integrate import solve_ivp
         self._solve_ivp = solve_ivp
 
+    def _horizon(self, scene: Scene) -> tuple[float, str]:
+        """(end time in ms, what ends a run there without a strike): integration.t_end_s if
+        given, else the time the stage takes to use up its travel; no fixed limit cuts off a
+        slow pull."""
+        drive = scene.drive
+        if scene.integration.t_end_s is not None:
+            return (scene.integration.t_end_s * 1e3,
+                    f'no strike within integration.t_end_s = {scene.integration.t_end_s:g} s')
+        travel = drive.travel_mm - drive.start_position_mm
+        t_travel = self.model.drive.time_to_pull(travel)
+        if math.isinf(t_travel):
+            return (STILL_STAGE_HORIZON_MS,
+                    f'the stage does not pull (drive.pull_speed_mm_per_s = '
+                    f'{drive.pull_speed_mm_per_s:g}): the arm was never released')
+        return (t_travel,
+                f'the stage used up its travel ({travel:g} mm from drive.start_position_mm = '
+                f'{drive.start_position_mm:g} to drive.travel_mm = {drive.travel_mm:g}, '
+                f'{t_travel * 1e-3:.3g} s at {drive.pull_speed_mm_per_s:g} mm/s) before the '
+                f'latch released the arm')
+
     # --- mode systems ---------------------------------------------------------------------------
     def _constrained(self, mode: Mode) -> bool:
         return mode.latched and mode.taut and self.model.rigid and not mode.saturated
 
     def _dynamics(self, mode: Mode, t, y) -> Dynamics:
-        key = (mode.latched, mode.taut, mode.saturated, t, *y)
+        key = (mode.latched, mode.taut, mode.saturated, mode.stuck_at, mode.slip, t, *y)
         if key == self._cache_key:
             return self._cache_value
         m = self.model
@@ -111,13 +144,14 @@ class HybridSimulator:
             # agrees to the bit (Newton's result depends at 1e-14 on where it starts, and an
             # event root within that of a segment end then had endpoint values of equal
             # sign for the root finder).
-            d = self._constrained_memo.get(t)
+            d = self._constrained_memo.get((t, mode.stuck_at))
             if d is None:
-                d = self._constrained_memo[t] = m.latched_constrained(t)
+                d = self._constrained_memo[(t, mode.stuck_at)] = m.latched_constrained(
+                    t, mode.stuck_at)
         elif mode.latched:
-            d = m.latched_free(t, y[0], y[1], mode.taut)
+            d = m.latched_free(t, y[0], y[1], mode.taut, mode.stuck_at)
         else:
-            d = m.unlatched(t, y[0], y[1], y[2], y[3], mode.taut, mode.saturated)
+            d = m.unlatched(t, y[0], y[1], y[2], y[3], mode.taut, mode.saturated, mode.slip)
         self._cache_key, self._cache_value = key, d
         return d
 
@@ -165,11 +199,18 @@ class HybridSimulator:
             g.terminal, g.direction, g.__name__ = True, direction, name
             events.append(g)
 
-        if mode.latched:
-            event('unlatch', -1, lambda t, y: dyn(mode, t, y).contact_torque_Nmm)
+        if mode.latched and mode.stuck_at is None:
+            event('unlatch', -1, lambda t, y: m.latch_margin(dyn(mode, t, y)))
+        elif mode.latched:
+            # stuck by friction: it slips when the torque needed to hold it exceeds the limit
+            event('slip', -1, lambda t, y: m.friction_limit(dyn(mode, t, y))
+                  - abs(dyn(mode, t, y).contact_torque_Nmm))
         else:
             phi = m.contact_angle
             event('recontact', -1, lambda t, y: y[1] - phi + EVENT_OVERLAP)
+            if m.friction_lever > 0.0:
+                # the arm comes to rest relative to the body: it sticks or reverses
+                event('arm_stops', -mode.slip, lambda t, y: y[3])
         if m.unilateral:
             def stretch(t, y):
                 th3 = m.contact_angle if mode.latched else y[1]
@@ -224,10 +265,16 @@ class HybridSimulator:
                     mode.taut = False
                     self.run_data.events.append(('slack', t, s))
                     continue
-            if mode.latched and d.contact_torque_Nmm < UNLATCH_TORQUE_TOL_NMM:
-                mode.latched = False
+            if (mode.latched and mode.stuck_at is None
+                    and m.latch_margin(d) < UNLATCH_TORQUE_TOL_NMM):
+                mode.latched, mode.slip = False, 1.0
                 self.run_data.events.append(('unlatch', t, s))
                 phase = self._advance(phase, 'II', t)
+                continue
+            if (mode.latched and mode.stuck_at is not None
+                    and abs(d.contact_torque_Nmm) - m.friction_limit(d) > -UNLATCH_TORQUE_TOL_NMM):
+                self._slip(mode, d)
+                self.run_data.events.append(('slip', t, s))
                 continue
             break
         if not mode.latched:
@@ -236,6 +283,24 @@ class HybridSimulator:
             if phase == 'III' and s[2] >= 0.0:
                 phase = self._advance(phase, 'IV', t)
         return phase
+
+    def _slip(self, mode: Mode, held: Dynamics) -> None:
+        """A stuck arm starts to move the way the torque it was held against pushes it."""
+        mode.latched, mode.stuck_at = False, None
+        mode.slip = -1.0 if held.contact_torque_Nmm > 0.0 else 1.0
+
+    def _stop_or_stick(self, mode: Mode, t, s) -> None:
+        """The free arm has come to rest relative to the body (pivot_friction): it sticks
+        where it is if the friction can hold it there, or moves on the way it is pushed."""
+        stuck = Mode(True, mode.taut, mode.saturated, stuck_at=s[1])
+        if self._constrained(stuck):
+            self.model.theta1_guess = s[0]
+            self._constrained_memo.clear()
+        held = self._dynamics(stuck, t, tuple(self._pack(stuck, s)))
+        if abs(held.contact_torque_Nmm) < self.model.friction_limit(held):
+            mode.latched, mode.stuck_at = True, s[1]
+        else:
+            self._slip(mode, held)
 
     def _advance(self, phase: str, new_phase: str, t: float) -> str:
         if PHASES.index(new_phase) == PHASES.index(phase) + 1:
@@ -271,7 +336,7 @@ class HybridSimulator:
             new_w1, new_w3 = w1 + u1 * impulse, w3 + u3 * impulse
         ke_after = mass.kinetic_energy(new_w1, new_w3)
         lost += ke_before - ke_after + (work - s[4])
-        mode.latched = latch
+        mode.latched, mode.stuck_at, mode.slip = latch, None, 1.0
         return (th1, th3, new_w1, new_w3, work, lost)
 
     def _retension(self, mode: Mode, t, s):
@@ -361,8 +426,16 @@ class HybridSimulator:
         start = time.perf_counter()
         self.start()
         self.advance(self.t_end, stop_after_peak=True)
-        self.run_data.wall_time_s = time.perf_counter() - start
-        return self.run_data
+        run = self.run_data
+        run.wall_time_s = time.perf_counter() - start
+        if math.isnan(run.peak_time_ms):
+            released = 'II' in run.phase_start_ms
+            run.end_reason = (self._horizon_reason if not released else
+                              self._horizon_reason.replace(
+                                  'before the latch released the arm',
+                                  'after the release, before a strike')
+                              .replace('the arm was never released', 'no strike followed'))
+        return run
 
     def advance(self, t_stop: float, stop_after_peak: bool = False) -> None:
         """Integrate from the current time to t_stop ms, handling every event on the way."""
@@ -388,8 +461,13 @@ class HybridSimulator:
                 continue
             run.events.append((name, t, s))
             if name == 'unlatch':
-                mode.latched = False
+                mode.latched, mode.slip = False, 1.0
                 phase = self._advance(phase, 'II', t)
+            elif name == 'slip':
+                self._slip(mode, self._state_dynamics(mode, t, s))
+            elif name == 'arm_stops':
+                s = (*s[:3], 0.0, *s[4:])
+                self._stop_or_stick(mode, t, s)
             elif name == 'slack':
                 mode.taut = False
             elif name == 'saturate':
@@ -442,14 +520,14 @@ class HybridSimulator:
             raise SimulationError(f'integration failed at t = {sol.t[-1]:.6f} ms in phase '
                                   f'{phase}: {sol.message}')
         self.run_data.solver_steps += len(sol.t) - 1
-        frozen = Mode(mode.latched, mode.taut, mode.saturated)
+        frozen = mode.copy()
         states = np.array([self._unpack(frozen, ti, yi)
                            for ti, yi in zip(sol.t.tolist(), sol.y.T.tolist())])
         dense = None
         if self.dense and sol.sol is not None:
             dense = _DenseSegment(self, frozen, sol.sol)
         self.run_data.segments.append(Segment(phase, mode.latched, mode.taut, sol.t, states,
-                                              dense, mode.saturated))
+                                              dense, mode.saturated, mode.stuck_at, mode.slip))
         name = None
         if sol.status == 1:
             fired = [ev.__name__ for ev, te in zip(events, sol.t_events) if len(te)]
@@ -462,8 +540,8 @@ class HybridSimulator:
                 + self.model.potential_energy(s[0], s[1], t))
 
     def dynamics_at(self, segment: Segment, t, s) -> Dynamics:
-        return self._state_dynamics(Mode(segment.latched, segment.taut, segment.saturated), t,
-                                    s)
+        return self._state_dynamics(Mode(segment.latched, segment.taut, segment.saturated,
+                                         segment.stuck_at, segment.slip), t, s)
 
     def _state_dynamics(self, mode: Mode, t, s) -> Dynamics:
         """Dynamics at a full state s. A latched arm on a taut rigid tendon has its theta1

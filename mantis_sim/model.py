@@ -13,7 +13,7 @@ Baumgarte correction). Its Jacobian grad l_t = (l_1, l_3) keeps full rank throug
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import NamedTuple, Optional
 
 from .drive import make_drive
 from .forces import (
@@ -30,7 +30,7 @@ from .scene import Scene
 MECHANICAL_EFFECTS = ('gravity', 'joint_damping', 'hinge_stiffness', 'fluid_drag', 'added_mass',
                       'tendon_slack', 'contact_restitution', 'stage_profile',
                       'published_arm_air_load', 'published_added_mass',
-                      'tendon_force_saturation')
+                      'tendon_force_saturation', 'pivot_friction')
 
 
 class SimulationError(RuntimeError):
@@ -77,6 +77,8 @@ class Model:
         self.k_t = scene.tendon.stiffness_N_per_mm
         self.c_t = scene.tendon.damping_N_ms_per_mm
         self.restitution = scene.contact.restitution if scene.has('contact_restitution') else 0.0
+        self.friction_lever = (scene.hinge.friction_lever_mm if scene.has('pivot_friction')
+                               else 0.0)
         self.latch_speed = scene.contact.latch_speed_rad_per_s * 1e-3
         self.contact_angle = self.mech.contact_angle
         self.kappa = scene.integration.baumgarte_per_ms
@@ -123,10 +125,12 @@ class Model:
         return tension, (tension - self.k_t * stretch) * rate
 
     # --- modes ----------------------------------------------------------------------------------
-    def latched_constrained(self, t: float) -> Dynamics:
-        """Latched arm, taut rigid tendon: no freedom left; theta1 follows from l_free(t)."""
+    def latched_constrained(self, t: float, th3: Optional[float] = None) -> Dynamics:
+        """Arm held at th3 (the contact, or stuck by friction), taut rigid tendon: no freedom
+        left; theta1 follows from l_free(t). contact_torque_Nmm is the torque the latch (or
+        the friction) exerts on theta3."""
         self.rhs_evals += 1
-        th3 = self.contact_angle
+        th3 = self.contact_angle if th3 is None else th3
         l_free, l_free_dot, l_free_ddot = self.free_length(t)
         th1, tg = self.solve_theta1(l_free, th3)
         w1 = l_free_dot / tg.d1
@@ -138,10 +142,11 @@ class Model:
         contact = m.m12 * a1 + c3 - q3 + tg.d3 * tension
         return Dynamics(th1, th3, w1, 0.0, a1, 0.0, tension, contact, -tension * l_free_dot, loss)
 
-    def latched_free(self, t, th1, w1, taut: bool) -> Dynamics:
-        """Latched arm, tendon slack or compliant: theta1 is the one freedom."""
+    def latched_free(self, t, th1, w1, taut: bool, th3: Optional[float] = None) -> Dynamics:
+        """Arm held at th3 (default: the contact), tendon slack or compliant: theta1 is the
+        one freedom."""
         self.rhs_evals += 1
-        th3 = self.contact_angle
+        th3 = self.contact_angle if th3 is None else th3
         m = self.mech.mass(th3)
         q1, q3, loss = self.applied(th1, th3, w1, 0.0)
         tension = 0.0
@@ -157,22 +162,29 @@ class Model:
         return Dynamics(th1, th3, w1, 0.0, a1, 0.0, tension, contact,
                         -tension * self.free_length(t)[1], loss)
 
-    def unlatched(self, t, th1, th3, w1, w3, taut: bool, saturated: bool = False) -> Dynamics:
+    def unlatched(self, t, th1, th3, w1, w3, taut: bool, saturated: bool = False,
+                  slip: float = 1.0) -> Dynamics:
         """Arm free of the body; rigid taut tendon as a constraint, else a force (or none).
         ``saturated``: the rigid tendon yields at its saturation tension (it stretches at that
-        constant force; what it takes from the drive's work is booked as loss)."""
+        constant force; what it takes from the drive's work is booked as loss). With
+        pivot_friction the pivot brakes the arm by lever x tension against its motion
+        (``slip``: +1 opening, -1 closing)."""
         self.rhs_evals += 1
         m = self.mech.mass(th3)
         q1, q3, loss = self.applied(th1, th3, w1, w3)
         c1, c3 = m.velocity_terms(w1, w3)
         f1, f3 = q1 - c1, q3 - c3
         tension = 0.0
+        # friction torque on theta3 per newton of tension, against the way the arm moves: that
+        # way is the mode's (``slip``), constant within a segment, so that no sign flips inside
+        # an integration step; the simulator ends the segment where w3 crosses zero.
+        per_newton = -slip * self.friction_lever
         l_free, l_free_dot, l_free_ddot = self.free_length(t)
         if saturated:
             tg = self.mech.tendon(th1, th3)
             tension = self.saturation_N
             f1 -= tension * tg.d1
-            f3 -= tension * tg.d3
+            f3 -= tension * (tg.d3 - per_newton)
             loss += tension * (tg.d1 * w1 + tg.d3 * w3 - l_free_dot)
             a1, a3 = m.solve(f1, f3)
         elif self.rigid and taut:
@@ -182,7 +194,8 @@ class Model:
             k = self.kappa
             gamma = (l_free_ddot - curvature - 2 * k * rate_error
                      - k * k * (tg.length - l_free))
-            u1, u3 = m.solve(tg.d1, tg.d3)
+            # M a = f - F (grad l - per_newton e3): the friction grows with the multiplier F
+            u1, u3 = m.solve(tg.d1, tg.d3 - per_newton)
             a1_free, a3_free = m.solve(f1, f3)
             tension = ((tg.d1 * a1_free + tg.d3 * a3_free - gamma)
                        / (tg.d1 * u1 + tg.d3 * u3))
@@ -192,10 +205,20 @@ class Model:
                 tg = self.mech.tendon(th1, th3)
                 tension, tendon_loss = self.compliant_tension(tg, w1, w3, t, taut)
                 f1 -= tension * tg.d1
-                f3 -= tension * tg.d3
+                f3 -= tension * (tg.d3 - per_newton)
                 loss += tendon_loss
             a1, a3 = m.solve(f1, f3)
+        loss += self.friction_lever * abs(tension * w3)
         return Dynamics(th1, th3, w1, w3, a1, a3, tension, 0.0, -tension * l_free_dot, loss)
+
+    def friction_limit(self, d: Dynamics) -> float:
+        """The most torque the pivot's friction can hold (N mm): lever x tension."""
+        return self.friction_lever * abs(d.tension_N)
+
+    def latch_margin(self, d: Dynamics) -> float:
+        """How much more opening torque an arm on the body can hold (N mm): the contact
+        torque, plus the pivot friction where the scene has it. It lets go at zero."""
+        return d.contact_torque_Nmm + self.friction_limit(d)
 
     # --- helpers --------------------------------------------------------------------------------
     def solve_theta1(self, l_target: float, th3: float):

@@ -87,6 +87,14 @@ class Hinge:
     k_Nmm_per_rad: float = param(0.71, 'N mm/rad', 'arm hinge stiffness (effect hinge_stiffness)',
                                  0.0, 1e3)
     rest_angle_deg: float = param(39.76, 'deg', 'hinge rest angle theta3h', -180.0, 180.0)
+    # The real robot is loaded past overcentering with its arm still on the body (the tracks:
+    # 0.4-0.5 rad of body rotation past it with the 19 mm guide, 0-0.14 rad with the 23 mm
+    # one), which a frictionless pivot cannot do. Coulomb friction at the arm's pivot pin,
+    # mu x pin radius x pin load, with the tendon force as the pin load: it holds the arm until
+    # the tendon's opening moment exceeds lever x tension, and brakes its swing by as much.
+    friction_lever_mm: float = param(0.0, 'mm', 'arm pivot friction: its torque is this lever '
+                                     '(mu x pin radius) x the tendon force (effect '
+                                     'pivot_friction)', 0.0, 5.0)
 
 
 @dataclass(frozen=True)
@@ -136,6 +144,8 @@ class Drive:
                                               'stage servo (effect stage_profile)', 0.0, 1000.0)
     start_position_mm: float = param(10.0, 'mm', 'stage position at the start pose (simulated '
                                      'rig; the stage travels 0-25 mm)', 0.0, 25.0)
+    travel_mm: float = param(25.0, 'mm', 'the stage\'s travel (MTS25: 25 mm): a simulated pull '
+                             'ends when the stage reaches it', 0.0, 1000.0, lo_open=True)
 
 
 @dataclass(frozen=True)
@@ -183,7 +193,9 @@ class Integration:
     rtol: float = param(1e-7, '1', 'relative tolerance', 1e-13, 1e-2)
     atol_scale: float = param(1e-3, '1', 'absolute tolerance = rtol x this x state scale',
                               1e-9, 1.0, lo_open=True)
-    t_end_s: float = param(10.0, 's', 'give up if no strike by then', 0.0, 1e6, lo_open=True)
+    t_end_s: Optional[float] = param(None, 's', 'stop here if no strike by then (default: run '
+                                     'until the strike, or until the stage\'s travel is used '
+                                     'up)', 0.0, 1e7, lo_open=True)
     post_peak_ms: float = param(0.0, 'ms', 'keep simulating this long after peak tip speed',
                                 0.0, 1e4)
     baumgarte_per_ms: float = param(0.05, '1/ms', 'rigid-constraint drift correction rate',

@@ -11,9 +11,10 @@ from .hybrid import PHASES, HybridSimulator, RawRun
 from .scene import Scene
 
 # The keys of `mantis sim --json`, exactly: other tools read them (issue 2).
-JSON_KEYS = ('peak_tip_speed_mps', 'max_spring_energy_mJ', 'peak_tendon_force_N', 'phase_start_s',
-             'phase_duration_s', 'energy_balance_residual_mJ', 'wall_time_s', 'rhs_evals',
-             'effects', 'solver', 'rtol')
+JSON_KEYS = ('status', 'reason', 'peak_tip_speed_mps', 'max_spring_energy_mJ',
+             'deepest_body_angle_rad', 'peak_tendon_force_N', 'phase_start_s', 'phase_duration_s',
+             'energy_balance_residual_mJ', 'wall_time_s', 'rhs_evals', 'effects', 'solver', 'rtol')
+STATUS_STRIKE, STATUS_NO_STRIKE = 'strike', 'no strike'
 
 
 @dataclass
@@ -130,8 +131,13 @@ def _metrics(sim: HybridSimulator, raw: RawRun, tr: Trajectory, rhs_evals: int) 
     strike = tr.phase == 'IV'
     return {
         'scene': raw.scene.name,
+        'status': STATUS_STRIKE if peak_t is not None else STATUS_NO_STRIKE,
+        'reason': raw.end_reason,
         'peak_tip_speed_mps': peak_tip,
         'max_spring_energy_mJ': float(tr.spring_energy_mJ.max()),
+        # The body's deepest turn before the strike: the angle from which a spring energy of
+        # any convention (the lab's k_s/2 (theta1 - theta1_rest)^2) is computed.
+        'deepest_body_angle_rad': float(tr.theta1[:_strike_end(tr)].min()),
         'peak_tendon_force_N': float(tr.tendon_force_N.max()),
         'phase_start_s': {p: (v * 1e-3 if v is not None else None) for p, v in starts.items()},
         'phase_duration_s': durations,
@@ -153,6 +159,12 @@ def _metrics(sim: HybridSimulator, raw: RawRun, tr: Trajectory, rhs_evals: int) 
         'solver': sim.method,
         'rtol': sim.rtol,
     }
+
+
+def _strike_end(tr: Trajectory) -> int:
+    """Index one past the last sample before the peak tip speed (all samples if none)."""
+    after = np.flatnonzero(tr.phase == 'IV')
+    return int(after[-1]) + 1 if after.size else len(tr.t_ms)
 
 
 def _constraint_drift(raw: RawRun, tr: Trajectory) -> float:

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from importlib import resources
 import os
 from pathlib import Path
@@ -40,6 +40,9 @@ EFFECTS = {
     'added_mass': 'entrained fluid inertia of body and arm blade (configuration dependent)',
     'tendon_slack': 'the tendon cannot push: it goes slack when its tension would turn negative',
     'contact_restitution': 'the arm rebounds on re-contact (otherwise re-contact is plastic)',
+    'pivot_friction': 'Coulomb friction at the arm pivot, hinge.friction_lever_mm x the tendon '
+                      'force: holds the arm on the body past overcentering, brakes its swing, '
+                      'and stops it where it cannot overcome it (stick-slip, by events)',
     'stage_profile': 'stage acceleration ramp and servo following error',
     'loadcell_dynamics': 'amplifier bandwidth, noise and ADC quantisation of the force signal',
     'camera_sampling': 'pixel quantisation of the tracked markers',
@@ -78,6 +81,8 @@ class Scene:
     loadcell: LoadCell = LoadCell()
     camera: Camera = Camera()
     integration: Integration = Integration()
+    # Where an identified scene's values come from (`mantis identify`): kept, never simulated.
+    provenance: Optional[dict] = field(default=None, compare=False, hash=False)
 
     def has(self, effect: str) -> bool:
         return effect in self.effects
@@ -148,6 +153,10 @@ def _check_consistency(scene: Scene) -> None:
     if needs_fluid and scene.medium.density_g_per_mm3 <= 0:
         raise ParameterError(f'effects {", ".join(sorted(needs_fluid))} need '
                              f'medium.density_g_per_mm3 > 0 (got 0)')
+    if scene.drive.start_position_mm >= scene.drive.travel_mm:
+        raise ParameterError(f'drive.start_position_mm = {scene.drive.start_position_mm} leaves '
+                             f'no travel: it must be below drive.travel_mm = '
+                             f'{scene.drive.travel_mm}')
     theta3 = scene.initial.theta3_deg
     if theta3 is not None and theta3 < g.contact_angle_deg:
         raise ParameterError(f'initial.theta3_deg = {theta3} is inside the body: it must be '
@@ -164,15 +173,20 @@ def scene_from_dict(data, name: str = '<scene>') -> Scene:
     data = dict(data)
     scene_name = data.pop('name', name)
     description = data.pop('description', '')
+    provenance = data.pop('provenance', None)
+    if provenance is not None and not isinstance(provenance, dict):
+        raise SceneError(f'{scene_name}: provenance must be a mapping, got '
+                         f'{type(provenance).__name__}')
     effects = _effects(data.pop('effects', []), scene_name)
     sections = {}
     for key, value in data.items():
         if key not in SECTIONS:
             raise ParameterError(f'{scene_name}: unknown key {key!r} (= {value!r}); valid '
-                                 f'keys: name, description, effects, {", ".join(SECTIONS)}')
+                                 f'keys: name, description, effects, provenance, '
+                                 f'{", ".join(SECTIONS)}')
         sections[key] = build_section(key, value or {})
     scene = Scene(name=str(scene_name), description=str(description), effects=effects,
-                  **sections)
+                  provenance=provenance, **sections)
     _check_consistency(scene)
     return scene
 

@@ -70,4 +70,4 @@ def test_the_published_terms_are_opt_in(ours):
     published_terms = {'published_arm_air_load', 'published_added_mass',
                        'tendon_force_saturation'}
     assert published_terms <= set(ours.metrics['effects'])
-    assert not published_terms & set(simulate(load_scene('air_23mm')).metrics['effects'])
+    assert not published_terms & set(simulate(load_scene('reference_air_23mm')).metrics['effects'])

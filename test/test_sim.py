@@ -40,20 +40,22 @@ from mantis_sim.scene import SceneError, available_scenes, load_scene
 REPO = Path(__file__).resolve().parents[1]
 
 PHASE_ORDER = ('I', 'II', 'III', 'IV')
+# The published robot (rigid tendon): the engine's hard cases run on it.
+REF_AIR, REF_AIR19, REF_WATER = 'reference_air_23mm', 'reference_air_19mm', 'reference_water_23mm'
 NOMINAL_EVENTS = ['unlatch', 'overcenter', 'max_contraction', 'peak']
 MECHANICAL = ('gravity, joint_damping, hinge_stiffness, fluid_drag, added_mass, tendon_slack, '
               'contact_restitution, stage_profile')
 EVERYTHING_ON = f'effects=[{MECHANICAL}]'
-# The stage's acceleration ramp and nothing else added to air_23mm's effects.
+# The stage's acceleration ramp and nothing else added to reference_air_23mm's effects.
 RAMPED = ('effects=[joint_damping, hinge_stiffness, fluid_drag, tendon_slack, '
           'contact_restitution, stage_profile]')
 
 
-def run(name='air_23mm', *overrides):
+def run(name=REF_AIR, *overrides):
     return simulate(load_scene(name, list(overrides))).metrics
 
 
-def sim(name='air_23mm', *overrides, dense=False):
+def sim(name=REF_AIR, *overrides, dense=False):
     return simulate(load_scene(name, list(overrides)), dense=dense)
 
 
@@ -79,12 +81,12 @@ def check_invariants(result, residual_per_rtol=10.0):
 
 @pytest.fixture(scope='module')
 def air():
-    return run('air_23mm')
+    return run(REF_AIR)
 
 
 @pytest.fixture(scope='module')
 def air_dense():
-    return simulate(load_scene('air_23mm'), dense=True)
+    return simulate(load_scene(REF_AIR), dense=True)
 
 
 # --- what it must show (issue 2, item 1) --------------------------------------------------------
@@ -123,13 +125,13 @@ def test_air_23mm_arm_peak_angular_speed_several_times_the_body(air):
 
 
 def test_water_23mm_peak_tip_speed_3_to_8_mps():
-    m = check_invariants(sim('water_23mm')).metrics
+    m = check_invariants(sim(REF_WATER)).metrics
     assert 3.0 <= m['peak_tip_speed_mps'] <= 8.0
     assert m['peak_arm_speed_radps'] > 3.0 * m['peak_body_speed_radps']
 
 
 def test_short_tendon_guide_stores_more_spring_energy(air):
-    assert run('air_19mm')['max_spring_energy_mJ'] > air['max_spring_energy_mJ']
+    assert run(REF_AIR19)['max_spring_energy_mJ'] > air['max_spring_energy_mJ']
 
 
 def test_larger_contact_angle_unlatches_earlier_and_stores_less(air):
@@ -160,7 +162,7 @@ def test_energy_conserved_without_damping_fluid_or_drive(case):
     """Drive at rest, no damping, no fluid, no tendon slack: the total mechanical energy stays
     what it was to better than 1e-8 of itself at tight tolerance, while the mechanism moves
     (tens of mJ change between spring and kinetic energy)."""
-    r = sim('air_23mm', 'drive.pull_speed_mm_per_s=0', 'integration.solver=DOP853',
+    r = sim(REF_AIR, 'drive.pull_speed_mm_per_s=0', 'integration.solver=DOP853',
             'integration.rtol=1e-11', 'integration.t_end_s=0.05',
             'integration.post_peak_ms=50', *CONSERVATIVE[case])
     tr = r.trajectory
@@ -173,7 +175,7 @@ def test_energy_conserved_without_damping_fluid_or_drive(case):
         assert [n for n, _, _ in r.raw.events].count('recontact') >= 2
 
 
-@pytest.mark.parametrize('scene, solver', [('air_23mm', 'DOP853'), ('water_23mm', 'DOP853'),
+@pytest.mark.parametrize('scene, solver', [(REF_AIR, 'DOP853'), (REF_WATER, 'DOP853'),
                                            ('air_23mm_compliant', 'Radau')])
 def test_energy_balance_closes_to_the_tolerance_with_everything_on(scene, solver):
     """Every mechanical effect on (gravity, damping, hinge, drag, added mass, slack,
@@ -190,9 +192,9 @@ def test_energy_balance_closes_to_the_tolerance_with_everything_on(scene, solver
 
 
 CONVERGENCE_CASES = [
-    ('air_23mm', []), ('water_23mm', []), ('air_23mm', ['geometry.contact_angle_deg=0']),
-    ('water_23mm', ['geometry.contact_angle_deg=10']),
-    ('air_23mm', ['drive.pull_speed_mm_per_s=500']),
+    (REF_AIR, []), (REF_WATER, []), (REF_AIR, ['geometry.contact_angle_deg=0']),
+    (REF_WATER, ['geometry.contact_angle_deg=10']),
+    (REF_AIR, ['drive.pull_speed_mm_per_s=500']),
 ]
 
 
@@ -222,7 +224,7 @@ def test_overcentering_with_rigid_tendon_keeps_constraint(air):
     dynamics divide by zero. Here the moment arm changes sign through the event, the tension
     passes it smoothly (no spike), the constraint holds, and afterwards the tendon drives the
     arm out: its speed keeps rising through phase III."""
-    r = check_invariants(sim('air_23mm'))
+    r = check_invariants(sim(REF_AIR))
     tr, mech = r.trajectory, Mechanism(r.scene)
     assert r.metrics['max_constraint_drift_mm'] < 1e-5
     t_oc = dict(r.metrics['events'])['overcenter'] * 1e3
@@ -244,7 +246,7 @@ def test_unlatches_once_without_chattering(air):
     """The latch lets go when the contact torque reaches zero, once, continuously: no
     chattering between latched and free, and the torque never had to pull."""
     assert [n for n, _ in air['events']].count('unlatch') == 1
-    tr = sim('air_23mm').trajectory
+    tr = sim(REF_AIR).trajectory
     latched = tr.phase == 'I'
     assert np.all(tr.contact_torque_Nmm[latched] >= -1e-9)
     assert abs(tr.contact_torque_Nmm[latched][-1]) < 1e-6
@@ -256,13 +258,13 @@ def test_unlatches_once_without_chattering(air):
 def test_every_solver_releases_the_latch_once(solver):
     """At lambda = 0 the arm leaves the body with zero relative speed; integration noise of a
     loose tolerance must not read as a re-contact (latch, unlatch, latch, ...)."""
-    r = check_invariants(sim('air_23mm', f'integration.solver={solver}', 'integration.rtol=1e-3'),
+    r = check_invariants(sim(REF_AIR, f'integration.solver={solver}', 'integration.rtol=1e-3'),
                          residual_per_rtol=30.0)
     assert [n for n, _ in r.metrics['events']] == NOMINAL_EVENTS
 
 
 def _tendon_runs(solver, rtol, *overrides):
-    return simulate(load_scene('air_23mm', ['initial.theta3_deg=30', 'integration.t_end_s=0.1',
+    return simulate(load_scene(REF_AIR, ['initial.theta3_deg=30', 'integration.t_end_s=0.1',
                                             f'integration.solver={solver}',
                                             f'integration.rtol={rtol!r}', *overrides]))
 
@@ -347,8 +349,8 @@ def test_very_stiff_compliant_tendon_converges_to_rigid():
     stiffness (an explicit method would step at the tendon's period). The stage ramps up
     (stage_profile): an ideal jump to full speed would ring the stiff, lightly damped tendon
     mode, which any method has to resolve until it decays."""
-    rigid = run('air_23mm', RAMPED)
-    runs = [check_invariants(sim('air_23mm', RAMPED, 'tendon.model=compliant',
+    rigid = run(REF_AIR, RAMPED)
+    runs = [check_invariants(sim(REF_AIR, RAMPED, 'tendon.model=compliant',
                                  f'tendon.stiffness_N_per_mm={k}', 'integration.solver=Radau',
                                  'integration.rtol=1e-6')).metrics for k in (1e4, 1e6)]
     errors = [abs(m['peak_tip_speed_mps'] / rigid['peak_tip_speed_mps'] - 1) for m in runs]
@@ -363,7 +365,7 @@ def test_added_mass_is_a_consistent_inertia():
     """Water's entrained fluid: M stays symmetric positive definite at every arm angle, the
     arm's inertia grows many times, dM/dtheta3 (which the velocity terms use) matches M's
     finite difference, and energy is conserved with it (test_energy_conserved_...)."""
-    water = load_scene('water_23mm')
+    water = load_scene(REF_WATER)
     wet, dry = Mechanism(water), Mechanism(water.with_values({'effects': ['fluid_drag']}))
     for th3 in np.linspace(0.0, math.pi, 13):
         m = wet.mass(th3)
@@ -379,12 +381,12 @@ def test_added_mass_is_a_consistent_inertia():
 def test_added_mass_slows_the_strike_and_keeps_balance():
     """In water the strike is several times slower than in air; the arm still outruns the
     body; added mass alone (without drag) also slows it."""
-    water = check_invariants(sim('water_23mm')).metrics
-    air = run('air_23mm')
+    water = check_invariants(sim(REF_WATER)).metrics
+    air = run(REF_AIR)
     assert water['peak_tip_speed_mps'] < air['peak_tip_speed_mps'] / 3
-    no_drag = run('water_23mm', 'effects=[joint_damping, hinge_stiffness, added_mass, '
+    no_drag = run(REF_WATER, 'effects=[joint_damping, hinge_stiffness, added_mass, '
                   'tendon_slack, contact_restitution]')
-    no_fluid = run('water_23mm', 'effects=[joint_damping, hinge_stiffness, tendon_slack, '
+    no_fluid = run(REF_WATER, 'effects=[joint_damping, hinge_stiffness, tendon_slack, '
                    'contact_restitution]')
     assert no_drag['peak_tip_speed_mps'] < no_fluid['peak_tip_speed_mps']
     assert no_drag['phase_duration_s']['IV'] > no_fluid['phase_duration_s']['IV']
@@ -397,7 +399,7 @@ def test_water_strike_within_10_percent_of_the_real_robot():
     """The blade's strip-theory drag with flat-plate section coefficients: the strike in water
     comes within 10 % of the real robot's 4.62 m/s (it was 3.03 with the revolving-wing
     coefficients and one centre of pressure)."""
-    tip = run('water_23mm')['peak_tip_speed_mps']
+    tip = run(REF_WATER)['peak_tip_speed_mps']
     assert abs(tip / REAL_WATER_TIP_SPEED_MPS - 1) < 0.10, tip
 
 
@@ -405,7 +407,7 @@ def test_blade_drag_is_the_strip_integral():
     """Three Gauss strips against a 64-strip sum over random states: within 0.1 % wherever the
     flow keeps one direction along the blade (the strike), and exact for pure rotation about
     the arm pivot (force ~ r^2, moment ~ r^3)."""
-    scene = load_scene('water_23mm')
+    scene = load_scene(REF_WATER)
     mech = Mechanism(scene)
     drag, fine = FluidDrag(mech, scene), FluidDrag(mech, scene)
     g, rho = scene.geometry, scene.medium.density_g_per_mm3
@@ -434,7 +436,7 @@ def test_blade_drag_is_the_strip_integral():
 def test_drag_at_zero_speed_is_smooth_and_dissipative():
     """At rest the angle of attack is undefined: the regularised drag is exactly zero there,
     goes to zero continuously (bounded force per unit speed), and never adds energy."""
-    scene = load_scene('water_23mm')
+    scene = load_scene(REF_WATER)
     drag = FluidDrag(Mechanism(scene), scene)
     assert drag(2.4, 0.1, 0.0, 0.0) == (0.0, 0.0, 0.0)
     rng = np.random.default_rng(1)
@@ -457,8 +459,8 @@ def test_release_from_rest_in_water():
     only ever takes energy out."""
     base = ['drive.pull_speed_mm_per_s=0', 'initial.theta3_deg=20', 'integration.t_end_s=0.02',
             'integration.post_peak_ms=20']
-    wet = check_invariants(sim('water_23mm', *base))
-    dry = check_invariants(sim('water_23mm', *base, 'effects=[joint_damping, hinge_stiffness, '
+    wet = check_invariants(sim(REF_WATER, *base))
+    dry = check_invariants(sim(REF_WATER, *base, 'effects=[joint_damping, hinge_stiffness, '
                                'tendon_slack, contact_restitution]'))
     assert wet.trajectory.tip_speed_mps.max() < dry.trajectory.tip_speed_mps.max() / 3
     assert np.all(np.diff(wet.trajectory.dissipated_mJ) >= 0.0)
@@ -471,7 +473,7 @@ def test_impact_on_recontact_rebounds_and_latches():
     """The hinge throws the arm back on the body: each impact reverses the arm at about the
     restitution coefficient (0.3), the bounces shrink geometrically, every impact dissipates,
     and the arm ends latched on the body (no endless re-contact chattering)."""
-    r = check_invariants(sim('air_23mm', 'initial.theta3_deg=20', 'drive.pull_speed_mm_per_s=0',
+    r = check_invariants(sim(REF_AIR, 'initial.theta3_deg=20', 'drive.pull_speed_mm_per_s=0',
                              'integration.t_end_s=0.2', 'hinge.rest_angle_deg=0',
                              'hinge.k_Nmm_per_rad=5'))
     impacts = [s for n, _, s in r.raw.events if n == 'recontact']
@@ -488,7 +490,7 @@ def test_impact_on_recontact_rebounds_and_latches():
 
 def test_plastic_recontact_without_restitution_latches_at_once():
     """contact_restitution off: re-contact is plastic, the first impact latches the arm."""
-    r = check_invariants(sim('air_23mm', 'effects=[joint_damping, hinge_stiffness, '
+    r = check_invariants(sim(REF_AIR, 'effects=[joint_damping, hinge_stiffness, '
                              'tendon_slack]', 'initial.theta3_deg=20',
                              'drive.pull_speed_mm_per_s=0', 'integration.t_end_s=0.2',
                              'hinge.rest_angle_deg=0', 'hinge.k_Nmm_per_rad=5'))
@@ -499,14 +501,14 @@ def test_plastic_recontact_without_restitution_latches_at_once():
 def test_zero_pull_stays_latched_for_an_hour():
     """v = 0: the start pose is a static equilibrium held by tendon and latch; it stays
     exactly so for an hour of simulated time, at a cost independent of that hour."""
-    r = check_invariants(sim('air_23mm', 'drive.pull_speed_mm_per_s=0',
+    r = check_invariants(sim(REF_AIR, 'drive.pull_speed_mm_per_s=0',
                              'integration.t_end_s=3600'))
     m, tr = r.metrics, r.trajectory
     assert m['phase_start_s']['II'] is None and not m['strike_reached']
     assert tr.t_ms[-1] == pytest.approx(3.6e6)
     assert np.ptp(tr.theta1) < 1e-12 and np.all(tr.omega1 == 0.0)
     assert np.ptp(tr.tendon_force_N) < 1e-9 and tr.contact_torque_Nmm.min() > 1.0
-    ten_seconds = run('air_23mm', 'drive.pull_speed_mm_per_s=0', 'integration.t_end_s=10')
+    ten_seconds = run(REF_AIR, 'drive.pull_speed_mm_per_s=0', 'integration.t_end_s=10')
     assert m['rhs_evals'] < 1.5 * ten_seconds['rhs_evals']
 
 
@@ -515,7 +517,7 @@ def test_very_fast_pulls():
     same pulled length), but the faster stage does more work during the strike itself, so
     the tip is faster; every run reaches all four phases and closes its balance."""
     speeds = (2.33, 100.0, 500.0)
-    runs = [check_invariants(sim('air_23mm', f'drive.pull_speed_mm_per_s={v}')).metrics
+    runs = [check_invariants(sim(REF_AIR, f'drive.pull_speed_mm_per_s={v}')).metrics
             for v in speeds]
     pulled = [m['phase_start_s']['II'] * v for m, v in zip(runs, speeds)]
     assert max(pulled) == pytest.approx(min(pulled), rel=0.01)
@@ -529,7 +531,7 @@ def test_very_fast_pulls():
 
 def test_contact_angles_zero_to_ten_degrees(air):
     """A larger contact angle unlatches earlier and stores less energy, from 0 to 10 deg."""
-    runs = [check_invariants(sim('air_23mm', f'geometry.contact_angle_deg={a}')).metrics
+    runs = [check_invariants(sim(REF_AIR, f'geometry.contact_angle_deg={a}')).metrics
             for a in (0.0, 3.0, 5.0, 10.0)]
     assert runs[1]['max_spring_energy_mJ'] == pytest.approx(air['max_spring_energy_mJ'])
     for m in runs:
@@ -545,9 +547,9 @@ def test_hours_of_slow_loading():
     """Pulled at 0.001 mm/s the rig loads for an hour before it fires: the release comes
     after the same pulled length as at 2.33 mm/s (loading is quasi-static), the strike is the
     same, and the cost does not grow with the simulated time."""
-    slow = check_invariants(sim('air_23mm', 'drive.pull_speed_mm_per_s=0.001',
+    slow = check_invariants(sim(REF_AIR, 'drive.pull_speed_mm_per_s=0.001',
                                 'integration.t_end_s=1e5')).metrics
-    nominal = run('air_23mm')
+    nominal = run(REF_AIR)
     assert slow['phase_start_s']['II'] > 3600
     assert slow['phase_start_s']['II'] * 0.001 == pytest.approx(
         nominal['phase_start_s']['II'] * 2.33, rel=1e-3)
@@ -559,7 +561,7 @@ def test_advancing_to_just_before_or_after_an_event_finds_the_same_events():
     """Events at near-coincident times: a segment ending within rounding of an event root
     (the simulated rig advances in steps) must neither miss the event nor trip the root
     finder."""
-    scene = load_scene('air_23mm')
+    scene = load_scene(REF_AIR)
     ref = HybridSimulator(scene)
     ref.run()
     names = [n for n, _, _ in ref.run_data.events]
@@ -615,7 +617,7 @@ def test_a_disabled_effect_is_never_evaluated(effect, monkeypatch):
     everything = MECHANICAL.split(', ')
     for enabled in (everything, [e for e in everything if e != effect]):
         calls.clear()
-        m = run('water_23mm', f'effects=[{", ".join(enabled)}]')
+        m = run(REF_WATER, f'effects=[{", ".join(enabled)}]')
         assert m['strike_reached'] and (effect in m['effects']) == (effect in enabled)
         if effect in enabled:
             assert len(calls) >= m['rhs_evals']
@@ -625,8 +627,8 @@ def test_a_disabled_effect_is_never_evaluated(effect, monkeypatch):
 
 def test_tendon_slack_off_means_no_slack_events():
     """Without tendon_slack the tendon is bilateral: no slack event is even looked for."""
-    on = HybridSimulator(load_scene('air_23mm'))
-    off = HybridSimulator(load_scene('air_23mm', ['effects=[joint_damping, hinge_stiffness]']))
+    on = HybridSimulator(load_scene(REF_AIR))
+    off = HybridSimulator(load_scene(REF_AIR, ['effects=[joint_damping, hinge_stiffness]']))
     for s in (on, off):
         s.start()
     names = [[e.__name__ for e in s._events(Mode(False, True), 'II', False, 0.0)]
@@ -638,7 +640,7 @@ def test_tendon_slack_off_means_no_slack_events():
 
 def test_every_shipped_scene_loads():
     scenes = available_scenes()
-    assert {'air_23mm', 'air_19mm', 'water_23mm', 'air_23mm_shim7deg'} <= set(scenes)
+    assert {REF_AIR, REF_AIR19, REF_WATER, 'air_23mm_shim7deg'} <= set(scenes)
     for name in scenes:
         load_scene(name)
 
@@ -651,7 +653,7 @@ def test_every_shipped_scene_loads():
 ])
 def test_bad_parameters_name_key_value_and_range(override, words):
     with pytest.raises(ParameterError) as info:
-        load_scene('air_23mm', [override])
+        load_scene(REF_AIR, [override])
     assert all(w in str(info.value) for w in words)
 
 
@@ -665,7 +667,7 @@ def test_unknown_and_malformed_scenes(tmp_path):
 
 
 def test_damaged_scene_files_are_refused_with_the_reason(tmp_path):
-    text = (REPO / 'mantis_sim' / 'scenes' / 'air_23mm.yaml').read_text()
+    text = (REPO / 'mantis_sim' / 'scenes' / 'reference_air_23mm.yaml').read_text()
     huge = tmp_path / 'huge.yaml'
     huge.write_text(text.replace('d_t_mm: 23.0', 'd_t_mm: ' + '9' * 400))
     with pytest.raises(ParameterError, match=r'geometry.d_t_mm = 9+\.\.\. \(400 characters\) '
@@ -691,7 +693,7 @@ def _bad_files(tmp_path):
 
 
 @pytest.mark.parametrize('args, words', [
-    (['--scene', 'no_such_scene'], ['unknown scene', 'no_such_scene', 'air_23mm']),
+    (['--scene', 'no_such_scene'], ['unknown scene', 'no_such_scene', REF_AIR]),
     (['--set', 'geometry.nope=1'], ['geometry.nope', '1', 'valid keys', 'L1_mm']),
     (['--set', 'nope=1'], ["'nope'", '1', 'geometry']),
     (['--set', 'body.mass_g=-1'], ['body.mass_g', '-1', '(0, 100] g']),
@@ -713,15 +715,15 @@ def test_cli_bad_input_exits_2_naming_key_value_and_range(args, words, tmp_path,
     args = [{'MALFORMED': str(malformed), 'OUT_OF_RANGE': str(out_of_range)}.get(a, a)
             for a in args]
     if '--scene' not in args:
-        args = ['--scene', 'air_23mm'] + args
+        args = ['--scene', REF_AIR] + args
     assert mantis(['sim', *args]) == 2
     captured = capsys.readouterr()
     assert captured.out == ''
     assert all(w in captured.err for w in words), captured.err
 
 
-@pytest.mark.parametrize('argv', [['sim'], ['sim', '--scene', 'air_23mm', '--rtol', 'tight'],
-                                  ['sim', '--scene', 'air_23mm', '--bogus']])
+@pytest.mark.parametrize('argv', [['sim'], ['sim', '--scene', REF_AIR, '--rtol', 'tight'],
+                                  ['sim', '--scene', REF_AIR, '--bogus']])
 def test_cli_usage_errors_exit_2(argv, capsys):
     with pytest.raises(SystemExit) as info:
         mantis(argv)
@@ -730,11 +732,14 @@ def test_cli_usage_errors_exit_2(argv, capsys):
 
 
 def test_cli_json_keys_are_exactly_the_issues(capsys):
-    assert mantis(['sim', '--scene', 'air_23mm', '--json']) == 0
+    assert mantis(['sim', '--scene', REF_AIR, '--json']) == 0
     data = json.loads(capsys.readouterr().out)
     assert set(data) == {'peak_tip_speed_mps', 'max_spring_energy_mJ', 'peak_tendon_force_N',
                          'phase_start_s', 'phase_duration_s', 'energy_balance_residual_mJ',
-                         'wall_time_s', 'rhs_evals', 'effects', 'solver', 'rtol'}
+                         'wall_time_s', 'rhs_evals', 'effects', 'solver', 'rtol',
+                         # issue 24: a run's outcome and the body's deepest turn
+                         'status', 'reason', 'deepest_body_angle_rad'}
+    assert data['status'] == 'strike' and data['reason'] == ''
     assert set(data) == set(JSON_KEYS)
     assert set(data['phase_start_s']) == set(PHASE_ORDER) == set(data['phase_duration_s'])
     assert data['effects'] == ['joint_damping', 'hinge_stiffness', 'fluid_drag', 'tendon_slack',

@@ -142,7 +142,7 @@ def test_loadcell_noise_is_reproducible_from_its_seed():
 
 
 def test_without_loadcell_effect_the_daq_reads_the_truth():
-    scene = load_scene('air_23mm')                   # no loadcell_dynamics
+    scene = load_scene('reference_air_23mm')                   # no loadcell_dynamics
     force = np.linspace(0, 10, 50)
     volts = LoadCellSensor(scene, RATE_HZ).measure_volts(force)
     assert np.allclose(volts * scene.loadcell.newtons_per_volt, force)

@@ -50,7 +50,7 @@ class TrialProcess:
     def __init__(self, tmp_path, processes='single', extra=(), preexec_fn=None):
         self.process = subprocess.Popen(
             [sys.executable, '-m', 'mantis_rig.cli', 'trial', '--backend', 'sim',
-             '--scene', 'air_23mm', '--out', str(tmp_path), '--processes', processes,
+             '--scene', 'reference_air_23mm', '--out', str(tmp_path), '--processes', processes,
              '--log-dir', str(tmp_path / 'logs'), *extra],
             cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
             start_new_session=True, preexec_fn=preexec_fn)
@@ -230,7 +230,7 @@ def test_a_full_disk_mid_pull_stops_the_stage_and_keeps_what_was_written(tmp_pat
     """A bag writer whose disk fills up mid-pull (every write from then on fails with ENOSPC):
     the stage stops, the trial ends aborted with the reason, the bag reads up to the failure."""
     rclpy.init()
-    stack = Stack(StackConfig(scene='air_23mm', supervisor={'out': str(tmp_path)}))
+    stack = Stack(StackConfig(scene='reference_air_23mm', supervisor={'out': str(tmp_path)}))
     client = TrialClient()
     stack.add_node(client)
     try:

@@ -52,7 +52,7 @@ from mantis_rig.recording.marker_block import concatenate, marker_block_from_msg
 from mantis_rig.recording.trial_summary import summarize
 
 REPO = Path(__file__).resolve().parents[1]
-SCENE = 'air_23mm'
+SCENE = 'reference_air_23mm'
 RTF = float(os.environ.get('MANTIS_TEST_RTF', '1.0'))
 FAST = 0.0      # real-time factor 0: as fast as the stack keeps up (what is not about pacing)
 TRIAL_TIMEOUT_S = 240.0

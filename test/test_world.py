@@ -101,7 +101,7 @@ def test_times_outside_the_history_are_refused(rig_world):
 
 
 def test_without_stage_motion_the_rig_stays_in_phase_one():
-    world = run_world(load_scene('air_23mm'), 1.0, velocity=0.0)
+    world = run_world(load_scene('reference_air_23mm'), 1.0, velocity=0.0)
     assert world.phase == 'I'
     force = world.tendon_force_N(np.linspace(0.1, 1.0, 10))
     assert np.ptp(force) < 1e-9 and force[0] > 1.0
@@ -110,7 +110,7 @@ def test_without_stage_motion_the_rig_stays_in_phase_one():
 def test_stopping_during_the_strike_keeps_the_simulation_consistent():
     """A stop on a free arm with a taut rigid tendon: the tendon goes slack (it cannot push),
     and the world runs on without chattering."""
-    scene = load_scene('air_23mm')
+    scene = load_scene('reference_air_23mm')
     world = World(scene)
     world.set_stage_velocity(2.33e-3)
     t = 0.0
@@ -142,7 +142,7 @@ def test_a_move_to_a_position_ends_at_rest_on_the_target_at_most_at_the_asked_sp
 
 
 def test_a_stop_ends_a_move_where_the_stage_is():
-    world = World(load_scene('air_23mm'))
+    world = World(load_scene('reference_air_23mm'))
     world.move_stage_to(world.stage_position_m() + 2e-3, 1e-3)
     world.advance_to(0.5)
     world.set_stage_velocity(0.0)

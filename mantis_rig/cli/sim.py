@@ -30,7 +30,8 @@ def add_commands(commands) -> None:
 
     bench = commands.add_parser('bench', help='benchmarks that print figures')
     bench.add_argument('which', choices=['accuracy'], help='accuracy: cost of accuracy per solver')
-    bench.add_argument('--scene', action='append', help='scene(s) (default air_23mm, water_23mm)')
+    bench.add_argument('--scene', action='append',
+                       help='scene(s) (default reference_air_23mm, reference_water_23mm)')
     bench.add_argument('--repeats', type=int, default=5, help='runs per point (median wall time)')
     bench.add_argument('--plot', type=Path, help='PNG of the Pareto fronts')
     bench.add_argument('--markdown', action='store_true', help='print tables as Markdown')
@@ -55,6 +56,8 @@ def run_sim(args) -> int:
         strike_report.plot_trial(result, args.plot)
     if args.json:
         print(json.dumps(result.to_json_dict()))
+        if not result.metrics['strike_reached']:
+            print(f'no strike: {result.metrics["reason"]}', file=sys.stderr)
     else:
         print(strike_report.summary_text(result))
         for label, path in (('trajectory', args.out), ('plot', args.plot)):
@@ -81,7 +84,7 @@ def run_scenes(args) -> int:
 
 def run_bench(args) -> int:
     from mantis_sim import benchmark
-    scenes = args.scene or ['air_23mm', 'water_23mm']
+    scenes = args.scene or ['reference_air_23mm', 'reference_water_23mm']
     tables = {}
     for name in scenes:
         print(f'# {name}: converged reference ...', file=sys.stderr, flush=True)

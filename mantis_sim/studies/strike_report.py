@@ -30,7 +30,7 @@ def summary_text(result: SimulationResult) -> str:
     share = m['arm_kinetic_energy_share_at_peak']
     lines += [
         f'peak tip speed        {m["peak_tip_speed_mps"]:.3f} m/s'
-        + ('' if m['strike_reached'] else '  (no strike: the trial never reached phase IV)'),
+        + ('' if m['strike_reached'] else f'  (no strike: {m["reason"]})'),
         f'peak angular speeds   body {m["peak_body_speed_radps"]:.1f} rad/s, '
         f'arm {m["peak_arm_speed_radps"]:.1f} rad/s (relative to the body)',
         f'max spring energy     {m["max_spring_energy_mJ"]:.3f} mJ',
