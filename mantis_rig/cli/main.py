@@ -7,7 +7,7 @@ import sys
 from mantis_sim.model import SimulationError
 
 from ..errors import RIG_FAULT, USAGE_ERROR, InputError, RigFault
-from . import analyze, doctor, import_tracking, recover, replay, sim, sweep, trial
+from . import analyze, doctor, identify, import_tracking, recover, replay, sim, sweep, trial
 
 EXIT_STATUSES = f"""exit status:
   0    done
@@ -33,6 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
     trial.add_commands(commands)
     sweep.add_commands(commands)
     doctor.add_commands(commands)
+    identify.add_commands(commands)
     return parser
 
 

@@ -15,16 +15,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 import os
 from pathlib import Path
-import socket
-import sys
 import time
 
 from mantis_sim.designs import ID_COLUMN, STATUS_OK, run_chunk
 from mantis_sim.errors import InputError
 
+from .parallel import Progress, connect
+
 CHECKPOINT_S = 10.0
 CHUNK_TARGET_S = 0.5            # wall time of one chunk: scheduling costs ~ms per task
-CONNECT_TIMEOUT_S = 10.0
 
 
 class SweepError(InputError):
@@ -94,33 +93,6 @@ def chunk_size_for(estimated_strike_s: float, designs: int, workers: int) -> int
     return max(1, min(by_time, by_balance))
 
 
-class Progress:
-    """One line on stderr, rewritten: designs done of all, rate, time left."""
-
-    def __init__(self, total: int, already: int = 0, stream=sys.stderr):
-        self.total, self.done, self.stream = total, already, stream
-        self.start = time.monotonic()
-        self.first = already
-        self._last = 0.0
-
-    def advance(self, n: int) -> None:
-        self.done += n
-        now = time.monotonic()
-        if now - self._last >= 0.2 or self.done >= self.total:
-            self._last = now
-            rate = (self.done - self.first) / max(now - self.start, 1e-9)
-            left = (self.total - self.done) / rate if rate > 0 else float('inf')
-            width = 30
-            filled = int(width * self.done / max(self.total, 1))
-            self.stream.write(f'\r[{"#" * filled}{"." * (width - filled)}] {self.done}/'
-                              f'{self.total} designs, {rate:.0f}/s, {left:.0f} s left ')
-            self.stream.flush()
-
-    def close(self) -> None:
-        self.stream.write('\n')
-        self.stream.flush()
-
-
 def run_sweep(scene_name: str, overrides: list, designs: list[dict], out: Path, *,
               scheduler: str | None = None, workers: int | None = None,
               chunk_size: int | None = None, estimated_strike_s: float = 0.01,
@@ -161,7 +133,7 @@ def run_sweep(scene_name: str, overrides: list, designs: list[dict], out: Path, 
                          [i for i, _ in chunk])
                 checkpoint()
         else:
-            client, cluster, where = _connect(scheduler, workers)
+            client, cluster, where = connect(scheduler, workers)
             started = time.monotonic()
             try:
                 n_workers = max(1, len(client.scheduler_info().get('workers', {})))
@@ -189,41 +161,6 @@ def _chunks(items: list, size: int):
         yield items[start:start + size]
 
 
-def _connect(scheduler: str | None, workers: int | None):
-    """(client, cluster or None, description) of the cluster to use."""
-    from dask.distributed import Client, LocalCluster
-    if scheduler is not None:
-        _check_reachable(scheduler)
-        try:
-            client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise SweepError(f'--scheduler {scheduler}: cannot reach the Dask scheduler '
-                             f'({type(exc).__name__}: {exc})') from None
-        return client, None, f'the Dask cluster at {scheduler}'
-    n = workers or os.cpu_count() or 1
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                           host='127.0.0.1', dashboard_address=None)
-    return Client(cluster), cluster, 'a local Dask cluster'
-
-
-def _check_reachable(scheduler: str) -> None:
-    """Refuse at once a scheduler address that is malformed or where nothing listens (dask's
-    own client retries for its whole timeout first)."""
-    from urllib.parse import urlsplit
-    parts = urlsplit(scheduler)
-    try:
-        host, port = parts.hostname, parts.port
-    except ValueError:
-        host = port = None
-    if parts.scheme != 'tcp' or not host or not port:
-        raise SweepError(f'--scheduler {scheduler}: expected tcp://HOST:PORT')
-    try:
-        socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
-    except OSError as exc:
-        raise SweepError(f'--scheduler {scheduler}: cannot reach the Dask scheduler '
-                         f'({exc.strerror or exc})') from None
-
-
 def _run_on_cluster(client, scene_name, overrides, chunks, finished, checkpoint) -> None:
     from dask.distributed import as_completed
     futures = {}
@@ -236,4 +173,4 @@ def _run_on_cluster(client, scene_name, overrides, chunks, finished, checkpoint)
         checkpoint()
 
 
-__all__ = ['Progress', 'SweepError', 'SweepSummary', 'read_table', 'run_sweep', 'write_table']
+__all__ = ['SweepError', 'SweepSummary', 'read_table', 'run_sweep', 'write_table']

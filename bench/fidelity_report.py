@@ -1,0 +1,227 @@
+"""Write docs/fidelity.md: the shipped scenes against the real strikes of the training set.
+
+    .venv/bin/python bench/fidelity_report.py [--data ../shared/data/real_trials] [--workers 2]
+
+Every strike of the training table is simulated at its own conditions with the shipped scenes
+(air_19mm, air_23mm, water_23mm: the identified robot) and with the reference scenes (the
+published parameters), and compared with the lab's values: per group, per recording day, and
+the four effects a design study varies. The left-out-day errors come from the scenes'
+provenance (`mantis identify --cross-validate`). Figures: parity plots and three trials.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+import sys
+
+from machine import REPO, stamp
+
+from mantis_sim.scene import load_scene
+from mantis_sim.studies import compare_plots, fidelity
+from mantis_sim.studies import identify as ident
+from mantis_sim.studies.parallel import ClusterMap
+from mantis_sim.studies.strikes import (
+    attach_processed_records,
+    phase_iv_times,
+    read_summary_table,
+)
+
+GROUPS = ('air_19mm', 'air_23mm', 'water_23mm')
+FIGURE_TRIALS = ('111219_11kfps_T_2X_A_1_1_2p3_-10_5_1', '0801319_19kfps_T_2X_A_1_1_2p3_-6_4',
+                 '011620_19kfps_T_2X_W_2_1_2p3_-8_7_2')
+DOCS = REPO / 'docs'
+FIGURES = DOCS / 'fidelity'
+
+
+def pct(x: float) -> str:
+    return f'{100 * x:+.1f} %' if x == x else 'n/a'
+
+
+def apct(x: float) -> str:
+    return f'{100 * x:.1f} %' if x == x else 'n/a'
+
+
+def simulate_all(scenes, strikes, mapper):
+    model = ident.StrikeModel(scenes, strikes, [], ident.Weights(), mapper)
+    return model.simulate([[]])[0]
+
+
+def group_table(rows, cv) -> list[str]:
+    lines = ['| group | strikes | peak tip speed: median error (median abs.) | left-out days '
+             '| spring energy: median error (median abs.) | left-out days |',
+             '|---|---|---|---|---|---|']
+    speed = fidelity.group_summary(rows, 'peak_tip_speed_mps')
+    energy = fidelity.group_summary(rows, 'spring_energy_mJ')
+    for g in speed:
+        c = cv.get(g, {})
+        lines.append(f'| {g} | {speed[g]["strikes"]} | {pct(speed[g]["median_error"])} '
+                     f'({apct(speed[g]["median_abs_error"])}) | '
+                     f'{apct(c.get("tip_speed_median_abs_error", float("nan")))} | '
+                     f'{pct(energy[g]["median_error"])} ({apct(energy[g]["median_abs_error"])})'
+                     f' | {apct(c.get("spring_energy_median_abs_error", float("nan")))} |')
+    return lines
+
+
+def day_table(rows, cv_by_day) -> list[str]:
+    lines = ['| recording day | group | strikes | peak tip speed, median abs. error: fitted '
+             '| left out | spring energy: fitted | left out |', '|---|---|---|---|---|---|---|']
+    for day in sorted({r['recording_day'] for r in rows}):
+        chosen = [r for r in rows if r['recording_day'] == day]
+        group = chosen[0]['group']
+        speed = fidelity.group_summary(chosen, 'peak_tip_speed_mps')[group]
+        energy = fidelity.group_summary(chosen, 'spring_energy_mJ')[group]
+        c = cv_by_day.get(day, {}).get(group, {})
+        lines.append(f'| {day} | {group} | {speed["strikes"]} | '
+                     f'{apct(speed["median_abs_error"])} | '
+                     f'{apct(c.get("tip_speed_median_abs_error", float("nan")))} | '
+                     f'{apct(energy["median_abs_error"])} | '
+                     f'{apct(c.get("spring_energy_median_abs_error", float("nan")))} |')
+    return lines
+
+
+def slope_table(rows_now, rows_before) -> list[str]:
+    lines = ['| effect | real (s.e.) | reference scenes | identified scenes | within 2 s.e. |',
+             '|---|---|---|---|---|']
+    for now, before in zip(fidelity.effect_slopes(rows_now), fidelity.effect_slopes(rows_before)):
+        lines.append(f'| {now["effect"]} | {now["real"]:+.3f} ({now["real_std_error"]:.3f}) '
+                     f'{now["unit"]} | {before["sim"]:+.3f} | {now["sim"]:+.3f} | '
+                     f'{"yes" if now["within_two_std_errors"] else "no"} |')
+    return lines
+
+
+def parameter_table(scenes) -> list[str]:
+    lines = ['| parameter | value | standard error | scenes |', '|---|---|---|---|']
+    seen = {}
+    for group, scene in scenes.items():
+        for label, entry in ((scene.provenance or {}).get('parameters') or {}).items():
+            seen.setdefault(label, (entry, []))[1].append(group)
+    for label, (entry, groups) in seen.items():
+        lines.append(f'| `{label}` | {entry["value"]:.4g} | {entry["std_error"]:.2g} | '
+                     f'{", ".join(groups)} |')
+    return lines
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--data', type=Path,
+                        default=REPO.parent / 'shared' / 'data' / 'real_trials')
+    parser.add_argument('--workers', type=int, default=None)
+    args = parser.parse_args()
+    table = args.data / 'authors_summary_train.csv'
+    strikes = attach_processed_records(read_summary_table(table),
+                                       args.data / 'authors_processed', phase_iv_times(table))
+    shipped = {g: load_scene(g) for g in GROUPS}
+    reference = {g: load_scene(f'reference_{g}') for g in GROUPS}
+    with ClusterMap(None, args.workers, progress=True) as mapper:
+        now = simulate_all(shipped, strikes, mapper)
+        before = simulate_all(reference, strikes, mapper)
+    rows_now = fidelity.error_rows(strikes, now)
+    rows_before = fidelity.error_rows(strikes, before)
+    FIGURES.mkdir(parents=True, exist_ok=True)
+    compare_plots.plot_parity(rows_now, FIGURES / 'parity.png')
+    by_trial = {s.trial: (s, m) for s, m in zip(strikes, now)}
+    for trial in FIGURE_TRIALS:
+        real, sim = by_trial[trial]
+        compare_plots.plot_trial(real, sim, FIGURES / f'{real.group}_{trial}.png')
+    provenance = {g: s.provenance or {} for g, s in shipped.items()}
+    cv = {g: p.get('cross_validated_errors', {}).get(g, {}) for g, p in provenance.items()}
+    cv_by_day = next((p.get('cross_validation_by_day') for p in provenance.values()
+                      if p.get('cross_validation_by_day')), {})
+    not_struck = [r for r in rows_now if r['status'] != 'strike']
+    text = TEMPLATE.format(
+        stamp=stamp(), strikes=len(strikes),
+        parameters='\n'.join(parameter_table(shipped)),
+        groups='\n'.join(group_table(rows_now, cv)),
+        groups_before='\n'.join(group_table(rows_before, {})),
+        days='\n'.join(day_table(rows_now, cv_by_day)),
+        slopes='\n'.join(slope_table(rows_now, rows_before)),
+        not_struck='\n'.join(f'- {r["trial"]}: {r["reason"]}' for r in not_struck) or
+        '- none: every strike of the table was simulated to its peak.',
+        figures='\n'.join(f'![{t}](fidelity/{by_trial[t][0].group}_{t}.png)'
+                          for t in FIGURE_TRIALS))
+    (DOCS / 'fidelity.md').write_text(text, encoding='utf-8')
+    print(text)
+    return 0
+
+
+TEMPLATE = """# Fidelity: the simulated robot against the real one
+
+Written by `bench/fidelity_report.py` ({stamp}). Every one of the {strikes} strikes of the
+training table (`../shared/data/real_trials/authors_summary_train.csv`) simulated at its own
+guide distance, contact angle and measured pull speed with the shipped scenes `air_19mm`,
+`air_23mm`, `water_23mm`, and compared with the lab's values: error = (simulated - measured) /
+measured. Spring energy is the lab's k_s/2 (theta1 - theta1_rest)^2 of the deepest body turn
+on both sides (k_s 47.7 N mm/rad, theta1_rest 4.0736 rad: `mantis_sim/studies/strikes.py`).
+The judge of the model is the held-out set of 23 strikes, not this table.
+
+## The identified robot
+What `mantis identify` fitted (scene provenance; standard errors from the Gauss-Newton
+covariance at the solution):
+
+{parameters}
+
+The model behind it, against the reference scenes (`reference_air_23mm` etc., the published
+parameters): a compliant tendon (Kevlar, load cell and stage in series), and Coulomb friction at
+the arm's pivot in proportion to the tendon force (effect `pivot_friction`), which holds the
+arm on the body past overcentering, brakes its swing and stops it where it cannot overcome it.
+
+## Per group
+Identified scenes (left-out days: each recording day predicted by a fit to the other days):
+
+{groups}
+
+Reference scenes, for comparison:
+
+{groups_before}
+
+## Per recording day
+{days}
+
+## The effects a design study varies
+Least squares over the strikes (air 23 mm effects within recording days), the same fit to the
+real and to the simulated values:
+
+{slopes}
+
+## Strikes the model did not simulate to a strike
+{not_struck}
+
+## Three trials
+theta1 and theta3 from the start of phase IV and their rates, real (authors' processed angles)
+and simulated:
+
+{figures}
+
+![parity](fidelity/parity.png)
+
+## What the identification could not explain
+- **The pull-speed effect.** Real strikes are faster at faster pulls (+0.9 m/s per mm/s in air
+  at 23 mm, within days, on all 55 strikes); the model's strike does not depend on the pull
+  speed (loading is quasi-static, and the stage moves 0.01 mm during a strike). The candidate
+  that would carry it, a viscoelastic spring (more torque at a faster pull), is refused by the
+  loading force itself: at the same body angle the load cell reads -0.02 +- 0.19 N more per
+  mm/s of pull within days (32 strikes), where that spring needs about +0.6 N.
+- **The contact-angle effect.** Within days a larger recorded contact angle goes with more
+  stored energy (+13 +- 3 mJ per degree, training table) and a faster strike. In the model a
+  larger contact angle overcenters earlier and stores less (-3 mJ per degree): the geometry
+  cannot turn the sign. The tracked arm angle on the latch is not the recorded contact angle:
+  it spans 1 to 12.5 degrees across days (2.4 to 4.1 recorded), and within days the two are
+  inversely related.
+- **Why the 19 mm guide holds the arm longer.** The tracks show the arm kept on the body for
+  0.42-0.54 rad of body rotation past overcentering with the 19 mm guide and 0-0.14 rad with
+  the 23 mm one, also on the one day (111419) with both guides. The loading force refuses a
+  displaced guide hole (moving it to delay overcentering by that much raises the loading force
+  3-4 N above the measured one), and a friction in proportion to the tendon force, the same at
+  both guides, cannot tell them apart: the scenes carry a friction lever per guide, so a sweep
+  of the guide distance within one scene keeps its scene's lever.
+- **The strike's time course.** The real strike takes longer from the start of phase IV to the
+  peak than the simulated one, and the real body turns back less (0.17-0.26 rad against about
+  0.3); the series enter the fit with a low weight (`mantis_sim/studies/identify.py`, Weights).
+- **Day-to-day spread.** Days differ by up to 5 m/s at the same conditions (the arm's latched
+  angle as tracked varies by day); the shipped scenes stand for the robot across days, so a
+  day's own error stays large where its state is far from the middle.
+"""
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,272 @@
+"""`mantis identify` and `mantis compare`: the simulated robot against real strikes.
+
+Both read real strikes from a summary table (one row per strike: conditions and the lab's
+values), with their recorded motion from processed records (`--processed DIR`, the authors'
+`<trial>_data.csv.gz`, timed by the table's t_z1_s) and from tracker exports (`--export
+TRIAL=PATH`, analysed here). Each strike is simulated with its group's scene (air_19mm,
+air_23mm, water_23mm by default) at its own guide distance, contact angle and measured pull
+speed, on a local Dask cluster of this machine's cores (`--workers`, `--scheduler`).
+"""
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+import sys
+
+import yaml
+
+from mantis_sim.errors import InputError
+from mantis_sim.scene import available_scenes, load_scene
+from mantis_sim.studies import fidelity
+from mantis_sim.studies import identify as ident
+from mantis_sim.studies.parallel import ClusterMap
+from mantis_sim.studies.strikes import (
+    RealStrike,
+    StrikeDataError,
+    StrikeSeries,
+    attach_processed_records,
+    phase_iv_times,
+    read_summary_table,
+)
+
+
+def add_commands(commands) -> None:
+    ident_cmd = commands.add_parser(
+        'identify', help='fit scene parameters to real strikes; write calibrated scenes',
+        description='Fit the scene parameters named by --fit to real strikes, each simulated '
+                    'at its own conditions; write one calibrated scene per group with its '
+                    'provenance, standard errors and correlations.')
+    _strike_arguments(ident_cmd)
+    ident_cmd.add_argument('--fit', action='append', required=True,
+                           metavar='KEY[@GROUP[+GROUP]][=LO:HI]',
+                           help='a parameter to fit, for all groups or only the named ones, '
+                                'within bounds (default: its valid range); repeatable')
+    ident_cmd.add_argument('--out', type=Path, required=True,
+                           help='folder for the calibrated scenes (<group scene>.yaml)')
+    ident_cmd.add_argument('--iterations', type=int, default=6,
+                           help='most Jacobian evaluations of the optimiser (default 6)')
+    ident_cmd.add_argument('--cross-validate', action='store_true',
+                           help='also leave one recording day out at a time and report the '
+                                'errors on the left-out days')
+    ident_cmd.set_defaults(run=run_identify)
+
+    compare = commands.add_parser(
+        'compare', help='real strikes beside their simulations: figures and error tables',
+        description='Simulate every strike of the table at its own conditions; write the '
+                    'errors (errors.csv), parity plots (parity.png) and, for each --figure '
+                    'trial with a recorded motion, its motion beside the simulated one.')
+    _strike_arguments(compare)
+    compare.add_argument('--out', type=Path, required=True, help='folder for the outputs')
+    compare.add_argument('--figure', action='append', default=[], metavar='TRIAL',
+                         help='a trial to plot (theta1, theta3 and rates); repeatable')
+    compare.set_defaults(run=run_compare)
+
+
+def _strike_arguments(parser) -> None:
+    parser.add_argument('--strikes', type=Path, required=True,
+                        help='summary table (CSV): trial, medium, d_t_mm, contact_angle_deg, '
+                             'pull_measured_mm_s, and v_max_mps, PE_max_mJ, ... as measured')
+    parser.add_argument('--processed', type=Path,
+                        help='folder of processed records <trial>_data.csv[.gz] (phase IV '
+                             'from the table\'s t_z1_s)')
+    parser.add_argument('--export', action='append', default=[], metavar='TRIAL=PATH',
+                        help='a tracker export (.xlsx, .csv) of the table\'s strike TRIAL')
+    parser.add_argument('--scene', action='append', default=[], metavar='GROUP=SCENE',
+                        help='the scene of a group of strikes (default: the group\'s name, '
+                             'e.g. air_23mm); repeatable')
+    parser.add_argument('--group', action='append', default=[],
+                        help='use only the strikes of this group (air_19mm, ...); repeatable')
+    parser.add_argument('--workers', type=int,
+                        help='local worker processes (default: one per core; 0: this process)')
+    parser.add_argument('--scheduler', help='an existing Dask scheduler, tcp://HOST:PORT')
+    parser.add_argument('--json', action='store_true', help='print the result as JSON')
+
+
+def _load_strikes(args) -> list[RealStrike]:
+    strikes = read_summary_table(args.strikes)
+    if args.processed is not None:
+        if not args.processed.is_dir():
+            raise StrikeDataError(f'--processed {args.processed}: no such folder')
+        strikes = attach_processed_records(strikes, args.processed, phase_iv_times(args.strikes))
+    by_trial = {s.trial: i for i, s in enumerate(strikes)}
+    for text in args.export:
+        trial, sep, path = text.partition('=')
+        if not sep or trial not in by_trial:
+            raise StrikeDataError(f'--export {text}: expected TRIAL=PATH with TRIAL a trial of '
+                                  f'{args.strikes}')
+        i = by_trial[trial]
+        strikes[i] = strikes[i].with_series(_export_series(Path(path), strikes[i]), path)
+    if args.group:
+        unknown = sorted(set(args.group) - {s.group for s in strikes})
+        if unknown:
+            raise StrikeDataError(f'--group {", ".join(unknown)}: no such strikes in '
+                                  f'{args.strikes} (groups: '
+                                  f'{", ".join(sorted({s.group for s in strikes}))})')
+        strikes = [s for s in strikes if s.group in args.group]
+    return strikes
+
+
+def _export_series(path: Path, strike: RealStrike) -> StrikeSeries:
+    """The strike's motion from a tracker export, by the rig's own analysis."""
+    from mantis_rig.analysis import AnalysisParams, analyze_tracks, load_tracks
+    if not path.exists():
+        raise StrikeDataError(f'--export {path}: no such file')
+    analysis = analyze_tracks(load_tracks(path), AnalysisParams(
+        d_t_mm=strike.d_t_mm, contact_angle_rad=math.radians(strike.contact_angle_deg)))
+    t_iv = analysis.phases.max_contraction_s
+    return StrikeSeries(analysis.time_s - t_iv, analysis.theta1_rad, analysis.theta3_rad)
+
+
+def _scenes(args, strikes: list[RealStrike]) -> tuple[dict, dict]:
+    """(group -> Scene, group -> scene file path) for every group among the strikes."""
+    chosen = {}
+    for text in args.scene:
+        group, sep, name = text.partition('=')
+        if not sep:
+            raise InputError(f'--scene {text}: expected GROUP=SCENE')
+        chosen[group] = name
+    known = available_scenes()
+    scenes, paths = {}, {}
+    for group in sorted({s.group for s in strikes}):
+        name = chosen.get(group, group)
+        scenes[group] = load_scene(name)
+        paths[group] = Path(name) if Path(name).suffix in ('.yaml', '.yml') else known[name]
+    return scenes, paths
+
+
+def _log(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def run_identify(args) -> int:
+    strikes = _load_strikes(args)
+    scenes, paths = _scenes(args, strikes)
+    params = [ident.parse_free_parameter(text, scenes) for text in args.fit]
+    if args.iterations < 1:
+        raise InputError(f'--iterations {args.iterations}: must be >= 1')
+    if args.out.exists() and not args.out.is_dir():
+        raise InputError(f'--out {args.out}: exists and is not a folder')
+    with ClusterMap(args.scheduler, args.workers, progress=not args.json) as mapper:
+        _log(f'identify: {len(strikes)} strikes ({", ".join(sorted(scenes))}), '
+             f'{len(params)} parameters, on {mapper.where} ({mapper.worker_count} worker(s))')
+        model = ident.StrikeModel(scenes, strikes, params, ident.Weights(), mapper)
+        fit = ident.identify(model, max_iterations=args.iterations, log=_log)
+        folds = ident.cross_validate(model, fit.values, log=_log) if args.cross_validate else None
+    args.out.mkdir(parents=True, exist_ok=True)
+    sources = [str(args.strikes)] + ([str(args.processed)] if args.processed else []) + [
+        t.partition('=')[2] for t in args.export]
+    written = []
+    for group, path in paths.items():
+        base = yaml.safe_load(path.read_text(encoding='utf-8'))
+        doc = ident.calibrated_scene(base, fit, group, folds, sources)
+        target = args.out / path.name
+        target.write_text(yaml.safe_dump(doc, sort_keys=False, width=100), encoding='utf-8')
+        written.append(str(target))
+    report = _identify_report(fit, folds, written)
+    if args.json:
+        print(json.dumps(report))
+    else:
+        print(_identify_text(report))
+    return 0
+
+
+def _identify_report(fit, folds, written) -> dict:
+    report = {
+        'parameters': {p.label: {'value': float(v), 'std_error': float(s)}
+                       for p, v, s in zip(fit.parameters, fit.values, fit.std_errors)},
+        'inseparable': [{'a': a, 'b': b, 'correlation': rho}
+                        for a, b, rho in fit.inseparable_pairs()],
+        'fitted_errors': ident.error_summary(fit.strikes, fit.simulated),
+        'evaluations': fit.evaluations, 'wall_s': fit.wall_s, 'scenes': written,
+    }
+    if folds:
+        report['cross_validated_errors'] = ident.error_summary(
+            [s for f in folds for s in f.strikes], [s for f in folds for s in f.simulated])
+        report['cross_validation_by_day'] = {
+            f.left_out: ident.error_summary(f.strikes, f.simulated) for f in folds}
+    return report
+
+
+def _identify_text(report: dict) -> str:
+    lines = ['parameter                                   value        std. error']
+    for label, entry in report['parameters'].items():
+        lines.append(f'{label:42s} {entry["value"]:12.5g} {entry["std_error"]:12.3g}')
+    for pair in report['inseparable']:
+        lines.append(f'the data cannot separate {pair["a"]} and {pair["b"]} (correlation '
+                     f'{pair["correlation"]:+.2f})')
+    lines.append('median |error|, fitted           strikes  tip speed  spring energy')
+    lines += _error_lines(report['fitted_errors'])
+    if 'cross_validated_errors' in report:
+        lines.append('median |error|, left-out days    strikes  tip speed  spring energy')
+        lines += _error_lines(report['cross_validated_errors'])
+        for day, errors in report['cross_validation_by_day'].items():
+            lines += [f'  day {day}: ' + line.strip() for line in _error_lines(errors)]
+    lines.append(f'{report["evaluations"]} evaluations of every strike in '
+                 f'{report["wall_s"]:.0f} s; calibrated scenes: {", ".join(report["scenes"])}')
+    return '\n'.join(lines)
+
+
+def _error_lines(errors: dict) -> list[str]:
+    return [f'  {group:30s} {e["strikes"]:7d} {100 * e["tip_speed_median_abs_error"]:9.1f} % '
+            f'{100 * e["spring_energy_median_abs_error"]:12.1f} %' for group, e in errors.items()]
+
+
+def run_compare(args) -> int:
+    strikes = _load_strikes(args)
+    scenes, _ = _scenes(args, strikes)
+    trials = {s.trial: s for s in strikes}
+    unknown = [t for t in args.figure if t not in trials]
+    if unknown:
+        raise InputError(f'--figure {", ".join(unknown)}: not a trial of {args.strikes}')
+    no_motion = [t for t in args.figure if trials[t].series is None]
+    if no_motion:
+        raise InputError(f'--figure {", ".join(no_motion)}: no recorded motion (give '
+                         f'--processed or --export for it)')
+    if args.out.exists() and not args.out.is_dir():
+        raise InputError(f'--out {args.out}: exists and is not a folder')
+    with ClusterMap(args.scheduler, args.workers, progress=not args.json) as mapper:
+        model = ident.StrikeModel(scenes, strikes, [], ident.Weights(), mapper)
+        simulated = model.simulate([[]])[0]
+    from mantis_sim.studies import compare_plots
+    args.out.mkdir(parents=True, exist_ok=True)
+    rows = fidelity.error_rows(strikes, simulated)
+    with open(args.out / 'errors.csv', 'w', newline='', encoding='utf-8') as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    compare_plots.plot_parity(rows, args.out / 'parity.png')
+    for trial in args.figure:
+        sim = simulated[strikes.index(trials[trial])]
+        compare_plots.plot_trial(trials[trial], sim, args.out / f'trial_{trial}.png')
+    report = {'groups': {key: fidelity.group_summary(rows, key)
+                         for key, _, _ in fidelity.COMPARED},
+              'effects': fidelity.effect_slopes(rows),
+              'not_struck': [{'trial': r['trial'], 'reason': r['reason']}
+                             for r in rows if r['status'] != 'strike'],
+              'outputs': sorted(str(p) for p in args.out.iterdir())}
+    if args.json:
+        print(json.dumps(report))
+    else:
+        print(_compare_text(report))
+    return 0
+
+
+def _compare_text(report: dict) -> str:
+    lines = ['group           strikes   median error (median |error|)']
+    for key, label, _ in fidelity.COMPARED:
+        lines.append(f'{label}:')
+        for group, e in report['groups'][key].items():
+            lines.append(f'  {group:14s} {e["strikes"]:7d}   {100 * e["median_error"]:+6.1f} % '
+                         f'({100 * e["median_abs_error"]:.1f} %)')
+    lines.append('effect                                                   real (+- s.e.)    '
+                 '   simulated')
+    for e in report['effects']:
+        mark = 'within 2 s.e.' if e['within_two_std_errors'] else 'OUTSIDE 2 s.e.'
+        lines.append(f'{e["effect"]:56s} {e["real"]:+7.3f} +- {e["real_std_error"]:.3f}  '
+                     f'{e["sim"]:+7.3f} {e["unit"]}  {mark}')
+    for r in report['not_struck']:
+        lines.append(f'no strike: {r["trial"]}: {r["reason"]}')
+    lines.append('outputs: ' + ', '.join(report['outputs']))
+    return '\n'.join(lines)

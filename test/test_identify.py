@@ -1,0 +1,253 @@
+"""The simulated robot against real strikes: the readers of the lab's strike tables and
+processed records, the comparison's statistics, the identification (it must recover parameters
+of strikes the model made itself), and `mantis compare` / `mantis identify` end to end on the
+project's copies of the real data (test/data/PROVENANCE.md)."""
+import csv
+import gzip
+import json
+import math
+
+from conftest import data_file
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+import numpy as np
+import pytest
+import yaml
+
+from mantis_rig.cli import main as mantis
+from mantis_sim.scene import load_scene, load_scene_file
+from mantis_sim.studies import fidelity
+from mantis_sim.studies import identify as ident
+from mantis_sim.studies.strikes import (
+    LAB_THETA1_REST_RAD,
+    RealStrike,
+    StrikeDataError,
+    lab_spring_energy_mJ,
+    phase_iv_times,
+    read_processed_record,
+    read_summary_table,
+)
+
+TABLE = 'real_trials/authors_summary_train.csv'
+PROCESSED = 'real_trials/authors_processed'
+AIR23 = '0801319_19kfps_T_2X_A_1_1_2p3_-6_4'
+AIR19 = '111219_11kfps_T_2X_A_1_1_2p3_-10_5_1'
+WATER = '011620_19kfps_T_2X_W_2_1_2p3_-8_7_2'
+
+
+def record(trial):
+    return data_file(f'{PROCESSED}/{trial}_data.csv.gz')
+
+
+# --- readers -----------------------------------------------------------------------------------
+def test_the_summary_table_gives_every_strike_with_its_conditions():
+    strikes = read_summary_table(data_file(TABLE))
+    assert len(strikes) == 32
+    groups = {g: sum(s.group == g for s in strikes) for g in ('air_19mm', 'air_23mm',
+                                                               'water_23mm')}
+    assert groups == {'air_19mm': 8, 'air_23mm': 18, 'water_23mm': 6}
+    pair = next(s for s in strikes if s.trial == '0828019_19kfps_T_2X_A_1_1_2p3_-3_2')
+    # the measured pull speed, not the nominal 2.3 of the trial's name
+    assert pair.pull_mm_per_s == pytest.approx(1.332)
+    assert pair.peak_tip_speed_mps == pytest.approx(22.96)
+    assert pair.recording_day == '0828019'
+
+
+def _table_with(tmp_path, edit):
+    rows = list(csv.DictReader(open(data_file(TABLE), newline='')))
+    header = list(rows[0])
+    header, rows = edit(header, rows)
+    path = tmp_path / 'table.csv'
+    with open(path, 'w', newline='') as handle:
+        writer = csv.DictWriter(handle, fieldnames=header, extrasaction='ignore')
+        writer.writeheader()
+        writer.writerows(rows)
+    return path
+
+
+@pytest.mark.parametrize('edit, message', [
+    (lambda h, r: ([c for c in h if c != 'd_t_mm'], r), r'missing column\(s\) d_t_mm'),
+    (lambda h, r: (h, [{**r[0], 'medium': 'oil'}]), "medium 'oil' is not one of air, water"),
+    (lambda h, r: (h, [{**r[0], 'contact_angle_deg': '0.0404'}, {**r[1],
+                                                                 'contact_angle_deg': '150'}]),
+     r'row 3 .*contact_angle_deg = 150 is outside \[0, 15\]'),
+    (lambda h, r: (h, [{**r[0], 'v_max_mps': 'fast'}]), "column v_max_mps = 'fast' is not a "
+                                                        'number'),
+    (lambda h, r: ([c for c in h if not c.startswith('pull')], r), 'pull_measured_mm_s or '
+                                                                   'pull_nominal_mm_s'),
+    (lambda h, r: (h, []), 'no rows'),
+])
+def test_a_broken_summary_table_is_refused_naming_row_and_column(tmp_path, edit, message):
+    with pytest.raises(StrikeDataError, match=message):
+        read_summary_table(_table_with(tmp_path, edit))
+
+
+def test_a_processed_record_is_timed_from_phase_iv_with_its_frames_rebuilt():
+    t_iv = phase_iv_times(data_file(TABLE))[AIR23]
+    series = read_processed_record(record(AIR23), t_iv)
+    step = np.diff(series.t_s)
+    assert step == pytest.approx(np.full(step.size, 1 / 19000), rel=1e-4)   # 19,000 frames/s
+    assert series.t_s[0] < 0 < series.t_s[-1]
+    # the lab's spring energy is its convention applied to the body angle at phase IV
+    strikes = {s.trial: s for s in read_summary_table(data_file(TABLE))}
+    for trial in (AIR23, AIR19, WATER):
+        s = read_processed_record(record(trial), phase_iv_times(data_file(TABLE))[trial])
+        theta1_iv = s.theta1_rad[np.argmin(np.abs(s.t_s))]
+        assert lab_spring_energy_mJ(theta1_iv) == pytest.approx(
+            strikes[trial].spring_energy_mJ, rel=2e-3)
+    assert LAB_THETA1_REST_RAD == pytest.approx(4.0736)
+
+
+def test_damaged_processed_records_are_refused(tmp_path):
+    raw = gzip.open(record(AIR23), 'rb').read()
+    packed = record(AIR23).read_bytes()
+    cases = {'cut.csv.gz': packed[:len(packed) // 2],
+             'lastline.csv': raw[:len(raw) // 2].rsplit(b'\n', 1)[0].rsplit(b',', 2)[0],
+             'text.csv': b'time,theta\n1,2\n',
+             'five.csv': b'\n'.join(b'%d,1,2,3,4' % i for i in range(20)),
+             'nan.csv': raw.replace(b'\n', b'\nnan,nan,nan,0,0,0\n', 1),
+             'notgzip.csv.gz': raw[:1000]}
+    for name, content in cases.items():
+        path = tmp_path / name
+        path.write_bytes(content)
+        with pytest.raises(StrikeDataError, match=name):
+            read_processed_record(path, 1.0)
+    with pytest.raises(StrikeDataError, match='phase IV at 99 s is outside the record'):
+        read_processed_record(record(AIR23), 99.0)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                  HealthCheck.function_scoped_fixture])
+@given(cut=st.integers(0, 3000), flips=st.lists(st.tuples(st.integers(0, 2999),
+                                                          st.integers(1, 255)), max_size=8))
+def test_a_summary_table_damaged_anyhow_is_read_or_refused(tmp_path, cut, flips):
+    content = bytearray(data_file(TABLE).read_bytes()[:cut or None])
+    for position, mask in flips:
+        if position < len(content):
+            content[position] ^= mask
+    path = tmp_path / 'damaged.csv'
+    path.write_bytes(bytes(content))
+    try:
+        strikes = read_summary_table(path)
+    except StrikeDataError:
+        return
+    for s in strikes:
+        assert s.medium in ('air', 'water') and 0 <= s.contact_angle_deg <= 15
+        assert math.isfinite(s.pull_mm_per_s) and s.pull_mm_per_s > 0
+
+
+def test_the_undamaged_table_is_read_by_the_fuzzed_reader():
+    """The property above is not vacuous: the table it damages is read whole when intact."""
+    assert len(read_summary_table(data_file(TABLE))) == 32
+
+
+# --- statistics ----------------------------------------------------------------------------------
+def test_a_slope_within_days_removes_each_day_s_level():
+    rng = np.random.default_rng(3)
+    days = [d for d in 'abcd' for _ in range(6)]
+    level = {'a': 0.0, 'b': 5.0, 'c': -3.0, 'd': 9.0}
+    x = rng.uniform(0.3, 2.4, len(days))
+    y = 0.9 * x + np.array([level[d] for d in days]) + rng.normal(0, 0.2, len(days))
+    within = fidelity.fit_slope(x, y, days)
+    assert abs(within.value - 0.9) < 3 * within.std_error < 0.5
+    pooled = fidelity.fit_slope(x, y)          # the day levels swamp a pooled fit
+    assert pooled.std_error > 3 * within.std_error
+
+
+# --- identification ------------------------------------------------------------------------------
+def _made_up_strikes(scene, conditions):
+    """Strikes 'measured' on the model itself, at the given (pull, contact angle, day)."""
+    strikes = []
+    for i, (pull, angle, day) in enumerate(conditions):
+        strike = RealStrike(f'synthetic_{i}', 'air', 23.0, angle, pull, day)
+        sim = fidelity.simulate_strike(scene, strike, series=False)
+        assert sim.status == 'strike'
+        strikes.append(RealStrike(strike.trial, 'air', 23.0, angle, pull, day,
+                                  peak_tip_speed_mps=sim.peak_tip_speed_mps,
+                                  spring_energy_mJ=sim.spring_energy_mJ))
+    return strikes
+
+
+def test_identification_recovers_a_hold_it_did_not_know():
+    base = load_scene('reference_air_23mm', [
+        'effects=[joint_damping, hinge_stiffness, fluid_drag, tendon_slack, '
+        'contact_restitution, pivot_friction]'])
+    truth = base.with_values({'hinge.friction_lever_mm': 0.12})
+    strikes = _made_up_strikes(truth, [(2.3, 3.0, 'd1'), (1.0, 2.0, 'd1'), (0.5, 4.0, 'd2')])
+    param = ident.parse_free_parameter('hinge.friction_lever_mm=0:0.5', {'air_23mm': base})
+    model = ident.StrikeModel({'air_23mm': base}, strikes, [param], ident.Weights(),
+                              lambda f, items: [f(i) for i in items])
+    fit = ident.identify(model, [0.03], max_iterations=10)
+    assert fit.values[0] == pytest.approx(0.12, abs=2e-3)
+    assert fit.cost < 1e-6 and np.isfinite(fit.std_errors[0])
+    summary = ident.error_summary(fit.strikes, fit.simulated)
+    assert summary['air_23mm']['spring_energy_median_abs_error'] < 1e-3
+    folds = ident.cross_validate(model, fit.values)
+    assert [f.left_out for f in folds] == ['d1', 'd2']
+    assert all(abs(f.values[0] - 0.12) < 5e-3 for f in folds)
+
+
+def test_a_free_parameter_must_name_a_numeric_key_and_known_groups():
+    scenes = {'air_23mm': load_scene('reference_air_23mm')}
+    p = ident.parse_free_parameter('hinge.friction_lever_mm@air_23mm=0:1', scenes)
+    assert (p.label, p.lower, p.upper) == ('hinge.friction_lever_mm@air_23mm', 0.0, 1.0)
+    for text, message in (('tendon.model', 'not a numeric scene parameter'),
+                          ('geometry.nope', 'not a numeric scene parameter'),
+                          ('geometry.L2_mm@water_23mm', 'no strikes of group'),
+                          ('geometry.L2_mm=0:500', 'must lie within the valid range'),
+                          ('geometry.L2_mm=1', 'bounds must be LO:HI')):
+        with pytest.raises(ident.IdentificationError, match=message):
+            ident.parse_free_parameter(text, scenes)
+
+
+# --- the commands ---------------------------------------------------------------------------------
+def test_compare_writes_errors_parity_and_a_trial_figure(tmp_path, capsys):
+    out = tmp_path / 'cmp'
+    code = mantis(['compare', '--strikes', str(data_file(TABLE)), '--processed',
+                   str(data_file(PROCESSED)), '--out', str(out), '--workers', '0', '--json',
+                   '--figure', AIR23, '--group', 'air_23mm', '--group', 'water_23mm'])
+    assert code == 0
+    report = json.loads(capsys.readouterr().out)
+    rows = list(csv.DictReader(open(out / 'errors.csv')))
+    assert len(rows) == 24 and {r['group'] for r in rows} == {'air_23mm', 'water_23mm'}
+    assert (out / 'parity.png').stat().st_size > 10_000
+    assert (out / f'trial_{AIR23}.png').stat().st_size > 10_000
+    speed = report['groups']['peak_tip_speed_mps']
+    assert speed['air_23mm']['strikes'] == 18 and speed['water_23mm']['strikes'] == 6
+    assert [e['effect'] for e in report['effects']][1].startswith('peak tip speed per mm/s')
+    assert all(r['status'] == 'strike' for r in rows)
+
+
+def test_identify_writes_a_calibrated_scene_with_its_provenance(tmp_path, capsys):
+    out = tmp_path / 'scenes'
+    code = mantis(['identify', '--strikes', str(data_file(TABLE)), '--processed',
+                   str(data_file(PROCESSED)), '--group', 'water_23mm', '--out', str(out),
+                   '--fit', 'arm.blade_drag_broadside=0.5:6', '--iterations', '2',
+                   '--workers', '0', '--cross-validate', '--json'])
+    assert code == 0
+    report = json.loads(capsys.readouterr().out)
+    assert set(report['cross_validation_by_day']) == {'011620', '011720'}
+    written = load_scene_file(out / 'water_23mm.yaml')
+    fitted = report['parameters']['arm.blade_drag_broadside']['value']
+    assert written.arm.blade_drag_broadside == pytest.approx(fitted, rel=1e-5)
+    provenance = written.provenance
+    assert provenance['strikes'] == 6 and provenance['recording_days'] == ['011620', '011720']
+    assert WATER in provenance['trials']
+    assert provenance['parameters']['arm.blade_drag_broadside']['std_error'] > 0
+    assert 'water_23mm' in provenance['cross_validated_errors']
+    doc = yaml.safe_load((out / 'water_23mm.yaml').read_text())
+    assert doc['name'] == 'water_23mm' and doc['medium']['name'] == 'water'
+
+
+@pytest.mark.parametrize('extra, message', [
+    (['--fit', 'geometry.nope'], 'not a numeric scene parameter'),
+    (['--fit', 'geometry.L2_mm', '--export', 'nosuchtrial=x.xlsx'], 'expected TRIAL=PATH'),
+    (['--fit', 'geometry.L2_mm', '--group', 'oil_23mm'], 'no such strikes'),
+    (['--fit', 'geometry.L2_mm', '--iterations', '0'], 'must be >= 1'),
+])
+def test_identify_refuses_bad_input_before_any_work(tmp_path, capsys, extra, message):
+    code = mantis(['identify', '--strikes', str(data_file(TABLE)), '--out',
+                   str(tmp_path / 'o'), '--workers', '0', *extra])
+    assert code == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / 'o').exists()
