@@ -46,10 +46,15 @@ def add_commands(commands) -> None:
     ident_cmd.add_argument('--out', type=Path, required=True,
                            help='folder for the calibrated scenes (<group scene>.yaml)')
     ident_cmd.add_argument('--iterations', type=int, default=6,
-                           help='most Jacobian evaluations of the optimiser (default 6)')
+                           help='most iterations of the optimiser, each the residuals of every '
+                                'strike and, but for the last, their Jacobian (default 6)')
     ident_cmd.add_argument('--cross-validate', action='store_true',
                            help='also leave one recording day out at a time and report the '
                                 'errors on the left-out days')
+    ident_cmd.add_argument('--cv-iterations', type=int, default=0,
+                           help='refit each left-out-day fit with at most this many Jacobian '
+                                'evaluations; 0 (default): one Gauss-Newton step from the full '
+                                'fit (one simulation of the left-out strikes per day)')
     ident_cmd.set_defaults(run=run_identify)
 
     compare = commands.add_parser(
@@ -146,6 +151,8 @@ def run_identify(args) -> int:
     params = [ident.parse_free_parameter(text, scenes) for text in args.fit]
     if args.iterations < 1:
         raise InputError(f'--iterations {args.iterations}: must be >= 1')
+    if args.cv_iterations < 0:
+        raise InputError(f'--cv-iterations {args.cv_iterations}: must be >= 0')
     if args.out.exists() and not args.out.is_dir():
         raise InputError(f'--out {args.out}: exists and is not a folder')
     with ClusterMap(args.scheduler, args.workers, progress=not args.json) as mapper:
@@ -153,14 +160,22 @@ def run_identify(args) -> int:
              f'{len(params)} parameters, on {mapper.where} ({mapper.worker_count} worker(s))')
         model = ident.StrikeModel(scenes, strikes, params, ident.Weights(), mapper)
         fit = ident.identify(model, max_iterations=args.iterations, log=_log)
-        folds = ident.cross_validate(model, fit.values, log=_log) if args.cross_validate else None
+        folds, cv_method = None, ''
+        if args.cross_validate and args.cv_iterations == 0:
+            folds = ident.cross_validate_one_step(model, fit, log=_log)
+            cv_method = ('leave one recording day out: one Gauss-Newton step from the full fit '
+                         'on the other days')
+        elif args.cross_validate:
+            folds = ident.cross_validate(model, fit.values, args.cv_iterations, log=_log)
+            cv_method = (f'leave one recording day out: refitted on the other days '
+                         f'({args.cv_iterations} iterations at most)')
     args.out.mkdir(parents=True, exist_ok=True)
     sources = [str(args.strikes)] + ([str(args.processed)] if args.processed else []) + [
         t.partition('=')[2] for t in args.export]
     written = []
     for group, path in paths.items():
         base = yaml.safe_load(path.read_text(encoding='utf-8'))
-        doc = ident.calibrated_scene(base, fit, group, folds, sources)
+        doc = ident.calibrated_scene(base, fit, group, folds, sources, cv_method)
         target = args.out / path.name
         target.write_text(yaml.safe_dump(doc, sort_keys=False, width=100), encoding='utf-8')
         written.append(str(target))

@@ -123,6 +123,9 @@ class Identification:
     strikes: list[RealStrike]
     simulated: list[SimulatedStrike]
     message: str
+    jacobian: Optional[np.ndarray] = None       # at the solution, residuals x parameters
+    residual: Optional[np.ndarray] = None
+    row_strike: Optional[np.ndarray] = None     # the strike of each residual
     started: str = field(default_factory=lambda: datetime.datetime.now(
         datetime.UTC).isoformat(timespec='seconds'))
 
@@ -208,9 +211,14 @@ class StrikeModel:
         return [results[k * n:(k + 1) * n] for k in range(len(value_sets))]
 
     def residuals(self, value_sets: list[np.ndarray]) -> list[np.ndarray]:
-        return [np.concatenate([strike_residuals(strike, sim, self.weights)
-                                for strike, sim in zip(self.strikes, sims)])
-                for sims in self.simulate(value_sets)]
+        out = []
+        for sims in self.simulate(value_sets):
+            parts = [strike_residuals(strike, sim, self.weights)
+                     for strike, sim in zip(self.strikes, sims)]
+            # which strike each residual belongs to (a fixed count per strike)
+            self.row_strike = np.repeat(np.arange(len(parts)), [p.size for p in parts])
+            out.append(np.concatenate(parts))
+        return out
 
 
 def identify(model: StrikeModel, initial: Optional[Sequence[float]] = None,
@@ -264,7 +272,7 @@ def identify(model: StrikeModel, initial: Optional[Sequence[float]] = None,
     return Identification(list(params), x, std_errors, correlation, x0,
                           float(0.5 * residual @ residual), residual.size, model.evaluations,
                           time.monotonic() - started, model.strikes, simulated,
-                          solution.message)
+                          solution.message, jacobian, residual, model.row_strike.copy())
 
 
 def _uncertainty(jacobian: np.ndarray, residual: np.ndarray, n: int):
@@ -292,13 +300,42 @@ class FoldResult:
     values: np.ndarray
 
 
-def cross_validate(model: StrikeModel, fitted: np.ndarray, max_iterations: int = 3,
-                   log: Callable[[str], None] = lambda _: None) -> list[FoldResult]:
-    """Leave one recording day out at a time (module docstring)."""
+def cross_validate_one_step(model: StrikeModel, fit: Identification,
+                            log: Callable[[str], None] = lambda _: None) -> list[FoldResult]:
+    """Leave one recording day out at a time, each fit to the other days taken as one
+    Gauss-Newton step from the full fit (with the full fit's Jacobian restricted to the other
+    days' residuals), within the bounds; the left-out day's strikes are then simulated with it.
+    The usual linearised leave-out: one simulation of the left-out strikes per day, where a
+    refit (cross_validate) costs a whole identification per day."""
+    days = _days(model)
+    lower = np.array([p.lower for p in fit.parameters])
+    upper = np.array([p.upper for p in fit.parameters])
+    folds = []
+    for day in days:
+        keep = np.array([model.strikes[i].recording_day != day for i in fit.row_strike])
+        j, r = fit.jacobian[keep], fit.residual[keep]
+        step = -np.linalg.pinv(j.T @ j) @ (j.T @ r)
+        values = np.clip(fit.values + step, lower, upper)
+        test = [s for s in model.strikes if s.recording_day == day]
+        predicted = StrikeModel(model.scenes, test, model.params, model.weights,
+                                model.mapper).simulate([values])[0]
+        log(f'left out {day}: {len(test)} strikes')
+        folds.append(FoldResult(day, test, predicted, values))
+    return folds
+
+
+def _days(model: StrikeModel) -> list[str]:
     days = sorted({s.recording_day for s in model.strikes})
     if len(days) < 2:
         raise IdentificationError('cross-validation needs strikes of at least two recording '
                                   'days (the recording_day column)')
+    return days
+
+
+def cross_validate(model: StrikeModel, fitted: np.ndarray, max_iterations: int = 3,
+                   log: Callable[[str], None] = lambda _: None) -> list[FoldResult]:
+    """Leave one recording day out at a time, refitted on the other days from the full fit."""
+    days = _days(model)
     folds = []
     for day in days:
         train = [s for s in model.strikes if s.recording_day != day]
@@ -320,7 +357,8 @@ def cross_validate(model: StrikeModel, fitted: np.ndarray, max_iterations: int =
 
 
 __all__ = ['CORRELATION_WARNING', 'FoldResult', 'FreeParameter', 'Identification',
-           'IdentificationError', 'StrikeModel', 'Weights', 'cross_validate', 'identify',
+           'IdentificationError', 'StrikeModel', 'Weights', 'cross_validate',
+           'cross_validate_one_step', 'identify',
            'parse_free_parameter', 'scene_for_group', 'strike_residuals']
 
 
@@ -338,7 +376,8 @@ def error_summary(strikes: list[RealStrike], simulated: list[SimulatedStrike]) -
 
 def calibrated_scene(base: dict, fit: Identification, group: str,
                      folds: Optional[list[FoldResult]] = None,
-                     sources: Sequence[str] = ()) -> dict:
+                     sources: Sequence[str] = (),
+                     cv_method: str = 'leave one recording day out') -> dict:
     """A scene file's content (``base``: the group's scene file as a mapping) with the fitted
     values that apply to the group and their provenance: which strikes, when, the residuals,
     each parameter's standard error and the correlations."""
@@ -375,7 +414,7 @@ def calibrated_scene(base: dict, fit: Identification, group: str,
     if folds:
         provenance['cross_validated_errors'] = error_summary(
             [s for f in folds for s in f.strikes], [s for f in folds for s in f.simulated])
-        provenance['cross_validation'] = 'leave one recording day out'
+        provenance['cross_validation'] = cv_method
         provenance['cross_validation_by_day'] = {
             f.left_out: error_summary(f.strikes, f.simulated) for f in folds}
     doc['provenance'] = provenance
