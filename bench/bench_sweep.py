@@ -1,7 +1,7 @@
 """What a design study costs: `mantis sweep` over many designs of a scene, with 1 and 2 local
 Dask workers (prints figures; not a test).
 
-    .venv/bin/python bench/bench_sweep.py [--designs 10000] [--scene air_23mm]
+    .venv/bin/python bench/bench_sweep.py [--designs 10000] [--scene reference_air_23mm]
                                           [--accuracy 1e-3]
 
 A Latin hypercube over the tendon guide distance (19-25 mm), the contact angle (1-8 deg) and
@@ -30,7 +30,7 @@ RANGES = ('geometry.d_t_mm=19:25', 'geometry.contact_angle_deg=1:8',
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--designs', type=int, default=10_000)
-    parser.add_argument('--scene', default='air_23mm')
+    parser.add_argument('--scene', default='reference_air_23mm')
     parser.add_argument('--accuracy', type=float, default=1e-3)
     args = parser.parse_args()
     setting = choose_setting(args.scene, [], args.accuracy)

@@ -253,3 +253,33 @@ def test_identify_refuses_bad_input_before_any_work(tmp_path, capsys, extra, mes
     assert code == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / 'o').exists()
+
+
+def test_a_tracker_export_gives_the_strike_s_motion_through_the_rig_s_analysis():
+    """`--export TRIAL=PATH`: the export analysed, timed from its own phase IV, cut to the
+    strike: the body turns back and the arm swings out, as in the authors' record."""
+    from mantis_rig.cli.identify import _export_series
+    strike = next(s for s in read_summary_table(data_file(TABLE)) if s.trial == AIR23)
+    series = _export_series(data_file('real_trials/air_23mm_19kfps_ma3.xlsx'), strike)
+    assert series.t_s[0] < -0.01 and series.t_s[-1] > 0.01
+    at = {t: np.interp(t, series.t_s, series.theta1_rad) for t in (0.0, 5e-3)}
+    arm = {t: np.interp(t, series.t_s, series.theta3_rad) for t in (0.0, 5e-3)}
+    assert 0.1 < at[5e-3] - at[0.0] < 0.4
+    assert arm[5e-3] - arm[0.0] > 1.5
+
+
+@pytest.mark.parametrize('group', ['air_19mm', 'air_23mm', 'water_23mm'])
+def test_the_shipped_scenes_are_the_identified_robot_with_their_provenance(group):
+    scene = load_scene(group)
+    provenance = scene.provenance
+    assert provenance['identified_by'] == 'mantis identify' and provenance['strikes'] == 32
+    assert len(provenance['recording_days']) >= 10
+    fitted = provenance['parameters']
+    assert all(entry['std_error'] >= 0 for entry in fitted.values())
+    assert scene.tendon.model == 'compliant' and scene.has('pivot_friction')
+    assert fitted['tendon.stiffness_N_per_mm']['value'] == scene.tendon.stiffness_N_per_mm
+    assert group in provenance['cross_validated_errors']
+    m = fidelity.simulate_strike(scene, RealStrike('nominal', scene.medium.name,
+                                                   scene.geometry.d_t_mm, 3.0, 2.3),
+                                 series=False)
+    assert m.status == 'strike' and m.spring_energy_mJ > 60

@@ -23,6 +23,7 @@ from mantis_sim.studies import fidelity
 from mantis_sim.studies import identify as ident
 from mantis_sim.studies.parallel import ClusterMap
 from mantis_sim.studies.strikes import (
+    RECORD_WINDOW_S,
     RealStrike,
     StrikeDataError,
     StrikeSeries,
@@ -121,7 +122,8 @@ def _export_series(path: Path, strike: RealStrike) -> StrikeSeries:
     analysis = analyze_tracks(load_tracks(path), AnalysisParams(
         d_t_mm=strike.d_t_mm, contact_angle_rad=math.radians(strike.contact_angle_deg)))
     t_iv = analysis.phases.max_contraction_s
-    return StrikeSeries(analysis.time_s - t_iv, analysis.theta1_rad, analysis.theta3_rad)
+    return StrikeSeries(analysis.time_s - t_iv, analysis.theta1_rad,
+                        analysis.theta3_rad).window(*RECORD_WINDOW_S)
 
 
 def _scenes(args, strikes: list[RealStrike]) -> tuple[dict, dict]:
