@@ -47,6 +47,7 @@ def run_replay(args) -> int:
                 args.wait_for_subscribers):
             err('replay', f'warning: not every topic had a subscriber after '
                            f'{args.wait_for_subscribers} s; playing anyway')
+        print(f'replaying {args.bag} at {args.rate:g}x real time (Ctrl-C stops)', flush=True)
         try:
             report = player.run(stop)
         except StopRequested:
