@@ -65,9 +65,8 @@ def group_table(rows, cv) -> list[str]:
 def day_table(rows, cv_by_day) -> list[str]:
     lines = ['| recording day | group | strikes | peak tip speed, median abs. error: fitted '
              '| left out | spring energy: fitted | left out |', '|---|---|---|---|---|---|---|']
-    for day in sorted({r['recording_day'] for r in rows}):
-        chosen = [r for r in rows if r['recording_day'] == day]
-        group = chosen[0]['group']
+    for day, group in sorted({(r['recording_day'], r['group']) for r in rows}):
+        chosen = [r for r in rows if r['recording_day'] == day and r['group'] == group]
         speed = fidelity.group_summary(chosen, 'peak_tip_speed_mps')[group]
         energy = fidelity.group_summary(chosen, 'spring_energy_mJ')[group]
         c = cv_by_day.get(day, {}).get(group, {})
@@ -90,14 +89,15 @@ def slope_table(rows_now, rows_before) -> list[str]:
 
 
 def parameter_table(scenes) -> list[str]:
-    lines = ['| parameter | value | standard error | scenes |', '|---|---|---|---|']
+    """Each fitted parameter once (a label KEY@GROUP applies to those groups only)."""
+    lines = ['| parameter | value | standard error | bounds of the fit |', '|---|---|---|---|']
     seen = {}
-    for group, scene in scenes.items():
-        for label, entry in ((scene.provenance or {}).get('parameters') or {}).items():
-            seen.setdefault(label, (entry, []))[1].append(group)
-    for label, (entry, groups) in seen.items():
-        lines.append(f'| `{label}` | {entry["value"]:.4g} | {entry["std_error"]:.2g} | '
-                     f'{", ".join(groups)} |')
+    for scene in scenes.values():
+        seen.update((scene.provenance or {}).get('parameters') or {})
+    for label, entry in seen.items():
+        note = ' (at its bound: the data want it beyond)' if entry.get('at_bound') else ''
+        lines.append(f'| `{label}` | {entry["value"]:.4g} | {entry["std_error"]:.2g}{note} | '
+                     f'{entry["bounds"][0]:g} to {entry["bounds"][1]:g} |')
     return lines
 
 

@@ -79,6 +79,7 @@ class Model:
         self.restitution = scene.contact.restitution if scene.has('contact_restitution') else 0.0
         self.friction_lever = (scene.hinge.friction_lever_mm if scene.has('pivot_friction')
                                else 0.0)
+        self.kinetic_lever = self.friction_lever * scene.hinge.kinetic_friction_ratio
         self.latch_speed = scene.contact.latch_speed_rad_per_s * 1e-3
         self.contact_angle = self.mech.contact_angle
         self.kappa = scene.integration.baumgarte_per_ms
@@ -178,7 +179,7 @@ class Model:
         # friction torque on theta3 per newton of tension, against the way the arm moves: that
         # way is the mode's (``slip``), constant within a segment, so that no sign flips inside
         # an integration step; the simulator ends the segment where w3 crosses zero.
-        per_newton = -slip * self.friction_lever
+        per_newton = -slip * self.kinetic_lever
         l_free, l_free_dot, l_free_ddot = self.free_length(t)
         if saturated:
             tg = self.mech.tendon(th1, th3)
@@ -208,7 +209,7 @@ class Model:
                 f3 -= tension * (tg.d3 - per_newton)
                 loss += tendon_loss
             a1, a3 = m.solve(f1, f3)
-        loss += self.friction_lever * abs(tension * w3)
+        loss += self.kinetic_lever * abs(tension * w3)
         return Dynamics(th1, th3, w1, w3, a1, a3, tension, 0.0, -tension * l_free_dot, loss)
 
     def friction_limit(self, d: Dynamics) -> float:

@@ -92,9 +92,12 @@ class Hinge:
     # one), which a frictionless pivot cannot do. Coulomb friction at the arm's pivot pin,
     # mu x pin radius x pin load, with the tendon force as the pin load: it holds the arm until
     # the tendon's opening moment exceeds lever x tension, and brakes its swing by as much.
-    friction_lever_mm: float = param(0.0, 'mm', 'arm pivot friction: its torque is this lever '
-                                     '(mu x pin radius) x the tendon force (effect '
-                                     'pivot_friction)', 0.0, 5.0)
+    friction_lever_mm: float = param(0.0, 'mm', 'arm pivot friction: the most torque it holds '
+                                     'is this lever (mu_static x pin radius) x the tendon force '
+                                     '(effect pivot_friction)', 0.0, 5.0)
+    kinetic_friction_ratio: float = param(1.0, '1', 'mu_kinetic / mu_static of the arm pivot: '
+                                          'the sliding pivot brakes with this share of the '
+                                          'static limit (effect pivot_friction)', 0.0, 1.0)
 
 
 @dataclass(frozen=True)

@@ -41,8 +41,9 @@ EFFECTS = {
     'tendon_slack': 'the tendon cannot push: it goes slack when its tension would turn negative',
     'contact_restitution': 'the arm rebounds on re-contact (otherwise re-contact is plastic)',
     'pivot_friction': 'Coulomb friction at the arm pivot, hinge.friction_lever_mm x the tendon '
-                      'force: holds the arm on the body past overcentering, brakes its swing, '
-                      'and stops it where it cannot overcome it (stick-slip, by events)',
+                      'force: holds the arm on the body past overcentering, brakes its swing '
+                      '(x hinge.kinetic_friction_ratio) and stops it where it cannot overcome '
+                      'it (stick-slip, by events)',
     'stage_profile': 'stage acceleration ramp and servo following error',
     'loadcell_dynamics': 'amplifier bandwidth, noise and ADC quantisation of the force signal',
     'camera_sampling': 'pixel quantisation of the tracked markers',

@@ -195,6 +195,7 @@ def _identify_report(fit, folds, written) -> dict:
                        for p, v, s in zip(fit.parameters, fit.values, fit.std_errors)},
         'inseparable': [{'a': a, 'b': b, 'correlation': rho}
                         for a, b, rho in fit.inseparable_pairs()],
+        'at_bounds': fit.at_bounds(),
         'fitted_errors': ident.error_summary(fit.strikes, fit.simulated),
         'evaluations': fit.evaluations, 'wall_s': fit.wall_s, 'scenes': written,
     }
@@ -210,6 +211,9 @@ def _identify_text(report: dict) -> str:
     lines = ['parameter                                   value        std. error']
     for label, entry in report['parameters'].items():
         lines.append(f'{label:42s} {entry["value"]:12.5g} {entry["std_error"]:12.3g}')
+    for label in report['at_bounds']:
+        lines.append(f'{label} ended at a bound: the data want it beyond; its standard error '
+                     f'means little')
     for pair in report['inseparable']:
         lines.append(f'the data cannot separate {pair["a"]} and {pair["b"]} (correlation '
                      f'{pair["correlation"]:+.2f})')

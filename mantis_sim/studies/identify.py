@@ -129,6 +129,12 @@ class Identification:
     started: str = field(default_factory=lambda: datetime.datetime.now(
         datetime.UTC).isoformat(timespec='seconds'))
 
+    def at_bounds(self) -> list[str]:
+        """Parameters the fit left within 1 % of the range at one of its bounds: the data want
+        them further out than allowed, and their standard errors do not mean much."""
+        return [p.label for p, v in zip(self.parameters, self.values)
+                if min(v - p.lower, p.upper - v) <= 0.01 * (p.upper - p.lower)]
+
     def value_map(self) -> dict[str, float]:
         return {p.label: float(v) for p, v in zip(self.parameters, self.values)}
 
@@ -388,6 +394,8 @@ def calibrated_scene(base: dict, fit: Identification, group: str,
     for p, value, std, start in zip(fit.parameters, fit.values, fit.std_errors, fit.initial):
         entry = {'value': float(f'{value:.6g}'), 'std_error': float(f'{std:.3g}'),
                  'bounds': [p.lower, p.upper], 'start': float(f'{start:.6g}')}
+        if p.label in fit.at_bounds():
+            entry['at_bound'] = True
         if p.applies_to(group):
             section, _, name = p.key.partition('.')
             doc.setdefault(section, {})[name] = entry['value']
