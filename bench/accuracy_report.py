@@ -1,4 +1,4 @@
-"""Write docs/accuracy_<scene>.md: what accuracy costs in time on one scene (work-precision).
+"""What accuracy costs in time on one scene (work-precision), as accuracy_SCENE.md in docs/.
 
     .venv/bin/python bench/accuracy_report.py --scene air_23mm [--repeats 3]
 
