@@ -8,7 +8,6 @@ REPO = Path(__file__).resolve().parents[1]
 #: Documents cited before the work that writes them has landed, and which work that is. A
 #: pending document may exist already; once it does, its entry can go.
 PENDING = {
-    'docs/fidelity.md': 'mantis identify / mantis compare (the simulator engineer\'s work)',
     'docs/data_path.md': 'one type and one unit per layer for marker and force data',
 }
 
