@@ -165,8 +165,10 @@ def check_completed_trial(bag, peak_time_s=None):
     # the stage went back to where the pull started
     states = [m.message for m in BagReader(bag).messages([resolve(JOINT_STATE)])]
     pull_s = summary.state_time('pulling')
-    start = next(s.position[0] for s in states
-                 if s.header.stamp.sec + s.header.stamp.nanosec * 1e-9 >= pull_s)
+    # where it stood when the pull began: the last state before it (the stage at rest), not the
+    # first after it, which a busy machine publishes with the stage already under way
+    start = [s.position[0] for s in states
+             if s.header.stamp.sec + s.header.stamp.nanosec * 1e-9 <= pull_s][-1]
     assert abs(states[-1].position[0] - start) < 50e-6
     assert abs(states[-1].position[0] - start) < abs(max(s.position[0] for s in states) - start)
     # the independent reader opens the bag and decodes every message of every topic

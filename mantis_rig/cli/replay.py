@@ -47,8 +47,9 @@ def run_replay(args) -> int:
                 args.wait_for_subscribers):
             err('replay', f'warning: not every topic had a subscriber after '
                            f'{args.wait_for_subscribers} s; playing anyway')
-        print(f'replaying {args.bag} at {args.rate:g}x real time (Ctrl-C stops)', flush=True)
         try:
+            # inside the try: a stop signal right after this line still ends with the report
+            print(f'replaying {args.bag} at {args.rate:g}x real time (Ctrl-C stops)', flush=True)
             report = player.run(stop)
         except StopRequested:
             stop.set()
