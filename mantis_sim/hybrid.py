@@ -100,6 +100,8 @@ class HybridSimulator:
         self.post_peak = integ.post_peak_ms
         self.dense = dense
         self.separation = max(SEPARATION, self.rtol * self.model.mech.d_t)
+        # ten times the absolute tolerance on w3 (rad/ms): see the arm_stops event
+        self.arm_stop_speed = 10.0 * self.rtol * self.atol_scale * STATE_SCALE[3]
         self._cache_key = None
         self._cache_value = None
         self._constrained_memo: dict = {}
@@ -209,8 +211,11 @@ class HybridSimulator:
             phi = m.contact_angle
             event('recontact', -1, lambda t, y: y[1] - phi + EVENT_OVERLAP)
             if m.friction_lever > 0.0:
-                # the arm comes to rest relative to the body: it sticks or reverses
-                event('arm_stops', -mode.slip, lambda t, y: y[3])
+                # the arm comes to rest relative to the body: it sticks or reverses. Past the
+                # integrator's resolution of w3 only: at a release the friction just balances,
+                # and w3's rounding noise about zero is no reversal (at rtol 1e-3 it chattered).
+                resolution = self.arm_stop_speed
+                event('arm_stops', -mode.slip, lambda t, y: y[3] + mode.slip * resolution)
         if m.unilateral:
             def stretch(t, y):
                 th3 = m.contact_angle if mode.latched else y[1]
@@ -292,12 +297,16 @@ class HybridSimulator:
     def _stop_or_stick(self, mode: Mode, t, s) -> None:
         """The free arm has come to rest relative to the body (pivot_friction): it sticks
         where it is if the friction can hold it there, or moves on the way it is pushed."""
-        stuck = Mode(True, mode.taut, mode.saturated, stuck_at=s[1])
+        at_contact = s[1] - self.model.contact_angle <= EVENT_OVERLAP
+        stuck = Mode(True, mode.taut, mode.saturated,
+                     stuck_at=None if at_contact else s[1])
         if self._constrained(stuck):
             self.model.theta1_guess = s[0]
             self._constrained_memo.clear()
         held = self._dynamics(stuck, t, tuple(self._pack(stuck, s)))
-        if abs(held.contact_torque_Nmm) < self.model.friction_limit(held):
+        if at_contact and self.model.latch_margin(held) > 0.0:
+            mode.latched, mode.stuck_at = True, None     # back on the body, held there
+        elif not at_contact and abs(held.contact_torque_Nmm) < self.model.friction_limit(held):
             mode.latched, mode.stuck_at = True, s[1]
         else:
             self._slip(mode, held)

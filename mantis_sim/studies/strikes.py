@@ -5,7 +5,7 @@ measured pull speed), with what was measured of it: the lab's summary values (pe
 spring energy, peak angular speeds) and, where recorded, the motion and tendon force around the
 strike (`StrikeSeries`, time from the start of phase IV). Readers here take the lab's two
 plain-text forms: a summary table (CSV, one row per strike) and a processed record (the
-authors' six columns per camera frame). Tracker exports are read by mantis_rig's analysis,
+authors' six columns per camera frame). Tracker exports are read by the rig package's analysis,
 which builds the same `StrikeSeries`.
 
 The lab's spring energy is a convention, not a model's: k_s/2 (theta1 - theta1_rest)^2 of the
