@@ -11,6 +11,7 @@ Each case writes the damaged copy to a fresh directory; the source files are nev
 Damaged spreadsheets (.xlsx) are covered by test_tracker_export.py (seeded damaged copies of
 real exports); the tracker's CSV export is fuzzed here, cell by cell and in its header.
 """
+from collections import Counter
 import os
 from pathlib import Path
 import shutil
@@ -49,6 +50,16 @@ def fuzz(test):
     return settings.get_profile(PROFILE)(test)
 
 
+def both_outcomes(outcomes: Counter, accepted: str) -> None:
+    """Each property is checked over its examples as a whole: some inputs must get through
+    (read, loaded or analysed) and some must be refused, or the property proves nothing about
+    one of the two paths (every input refused would pass "analysed plausibly or refused")."""
+    if PROFILE == 'long':
+        print(f'\n{dict(outcomes)}')
+    assert outcomes[accepted] > 0, f'no input was {accepted}: {dict(outcomes)}'
+    assert outcomes['refused'] > 0, f'no input was refused: {dict(outcomes)}'
+
+
 # --------------------------------------------------------------------------- bags
 @pytest.fixture(scope='module')
 def source_bag(tmp_path_factory):
@@ -66,10 +77,10 @@ def source_bag(tmp_path_factory):
     return path
 
 
-def read_everything(bag: Path) -> None:
+def read_everything(bag: Path) -> str:
     """What analyze, replay and recover do with a bag before any analysis: open it, decode
     every message, read the trial's marker and force blocks. Only the readers' own errors may
-    come out."""
+    come out. Returns 'read' or 'refused'."""
     with warnings.catch_warnings():
         warnings.simplefilter('ignore', TruncatedBagWarning)
         try:
@@ -78,7 +89,8 @@ def read_everything(bag: Path) -> None:
                 pass
             read_trial_bag(bag)
         except (BagError, TrackFormatError):
-            pass
+            return 'refused'
+    return 'read'
 
 
 def damaged_copy(source: Path, edit) -> Path:
@@ -133,33 +145,50 @@ def changed_behind_crc(chunk, where, value, span):
     return edit
 
 
-@fuzz
-@given(cut=st.floats(0.0, 1.0))
-def test_a_bag_cut_anywhere_is_read_up_to_the_cut_or_refused(source_bag, cut):
-    bag = damaged_copy(source_bag, lambda data: data[:int(len(data) * cut)])
-    (bag / 'metadata.yaml').unlink()
-    read_everything(bag)
-    shutil.rmtree(bag.parent)
+def test_a_bag_cut_anywhere_is_read_up_to_the_cut_or_refused(source_bag):
+    outcomes = Counter()
+
+    @fuzz
+    @given(cut=st.floats(0.0, 1.0))
+    def check(cut):
+        bag = damaged_copy(source_bag, lambda data: data[:int(len(data) * cut)])
+        (bag / 'metadata.yaml').unlink()
+        outcomes[read_everything(bag)] += 1
+        shutil.rmtree(bag.parent)
+
+    check()
+    both_outcomes(outcomes, 'read')
 
 
-@fuzz
-@given(edits=BYTE_EDITS)
-def test_a_bag_with_changed_bytes_is_read_or_refused(source_bag, edits):
-    bag = damaged_copy(source_bag, changed_bytes(edits))
-    read_everything(bag)
-    shutil.rmtree(bag.parent)
+def test_a_bag_with_changed_bytes_is_read_or_refused(source_bag):
+    outcomes = Counter()
+
+    @fuzz
+    @given(edits=BYTE_EDITS)
+    def check(edits):
+        bag = damaged_copy(source_bag, changed_bytes(edits))
+        outcomes[read_everything(bag)] += 1
+        shutil.rmtree(bag.parent)
+
+    check()
+    both_outcomes(outcomes, 'read')
 
 
-@fuzz
-@given(chunk=st.integers(0, 10_000), where=st.floats(0.0, 1.0), value=st.integers(0, 255),
-       span=st.integers(1, 64))
-def test_records_changed_behind_a_valid_crc_are_read_or_refused(source_bag, chunk, where,
-                                                                value, span):
+def test_records_changed_behind_a_valid_crc_are_read_or_refused(source_bag):
     """The damage the CRCs do not catch: bytes inside a chunk changed, the chunk's CRC
     recomputed, so the decoder meets wrong lengths, opcodes and message payloads."""
-    bag = damaged_copy(source_bag, changed_behind_crc(chunk, where, value, span))
-    read_everything(bag)
-    shutil.rmtree(bag.parent)
+    outcomes = Counter()
+
+    @fuzz
+    @given(chunk=st.integers(0, 10_000), where=st.floats(0.0, 1.0),
+           value=st.integers(0, 255), span=st.integers(1, 64))
+    def check(chunk, where, value, span):
+        bag = damaged_copy(source_bag, changed_behind_crc(chunk, where, value, span))
+        outcomes[read_everything(bag)] += 1
+        shutil.rmtree(bag.parent)
+
+    check()
+    both_outcomes(outcomes, 'read')
 
 
 YAML_VALUES = st.one_of(st.none(), st.booleans(), st.integers(), st.floats(),
@@ -171,17 +200,22 @@ METADATA_KEYS = ('version', 'storage_identifier', 'relative_file_paths', 'durati
                  'compression_format', 'custom_data')
 
 
-@fuzz
-@given(key=st.sampled_from(METADATA_KEYS), value=YAML_VALUES)
-def test_a_bags_metadata_yaml_with_any_field_changed_is_read_or_refused(source_bag, key,
-                                                                       value):
-    bag = damaged_copy(source_bag, lambda data: data)
-    path = bag / 'metadata.yaml'
-    document = yaml.safe_load(path.read_text())
-    document['rosbag2_bagfile_information'][key] = value
-    path.write_text(yaml.safe_dump(document))
-    read_everything(bag)
-    shutil.rmtree(bag.parent)
+def test_a_bags_metadata_yaml_with_any_field_changed_is_read_or_refused(source_bag):
+    outcomes = Counter()
+
+    @fuzz
+    @given(key=st.sampled_from(METADATA_KEYS), value=YAML_VALUES)
+    def check(key, value):
+        bag = damaged_copy(source_bag, lambda data: data)
+        path = bag / 'metadata.yaml'
+        document = yaml.safe_load(path.read_text())
+        document['rosbag2_bagfile_information'][key] = value
+        path.write_text(yaml.safe_dump(document))
+        outcomes[read_everything(bag)] += 1
+        shutil.rmtree(bag.parent)
+
+    check()
+    both_outcomes(outcomes, 'read')
 
 
 # --------------------------------------------------------------------------- scenes
@@ -195,22 +229,38 @@ SCENE_VALUES = st.one_of(st.none(), st.booleans(), st.integers(),
                          st.dictionaries(st.text(max_size=5), st.floats(), max_size=2))
 
 
-@fuzz
-@given(field=st.sampled_from(SCENE_FIELDS), value=SCENE_VALUES)
-def test_a_scene_with_any_field_changed_loads_or_is_refused(tmp_path_factory, field, value):
+def test_a_scene_with_any_field_changed_loads_or_is_refused(tmp_path_factory):
     import copy
-    data = copy.deepcopy(SCENE)
-    section, key = field
-    if key is None:
-        data[section] = value
-    else:
-        data[section][key] = value
-    path = tmp_path_factory.mktemp('scene') / 'fuzzed.yaml'
-    path.write_text(yaml.safe_dump(data))
-    try:
-        load_scene_file(path)
-    except (SceneError, ParameterError):
-        pass
+    outcomes = Counter()
+
+    @fuzz
+    @given(field=st.sampled_from(SCENE_FIELDS), value=SCENE_VALUES)
+    def check(field, value):
+        data = copy.deepcopy(SCENE)
+        section, key = field
+        if key is None:
+            data[section] = value
+        else:
+            data[section][key] = value
+        path = tmp_path_factory.mktemp('scene') / 'fuzzed.yaml'
+        path.write_text(yaml.safe_dump(data))
+        try:
+            load_scene_file(path)
+        except (SceneError, ParameterError):
+            outcomes['refused'] += 1
+            return
+        outcomes['loaded'] += 1
+
+    check()
+    both_outcomes(outcomes, 'loaded')
+
+
+def test_the_scene_files_own_bytes_load_by_the_random_bytes_path(tmp_path):
+    """The companion of the random-bytes property below, which can only refuse: the same
+    path (bytes written, then loaded) accepts a real scene's bytes."""
+    path = tmp_path / 'bytes.yaml'
+    path.write_bytes((REPO / 'mantis_sim' / 'scenes' / 'air_23mm_rig.yaml').read_bytes())
+    assert load_scene_file(path) is not None
 
 
 @fuzz
@@ -330,34 +380,22 @@ def as_bytes(value) -> bytes:
     return value if isinstance(value, bytes) else value.encode('utf-8', 'surrogatepass')
 
 
-OUTCOMES = {'analysed': 0, 'refused': 0}     # printed after the long profile (-s)
-
-
-@pytest.fixture(scope='module', autouse=True)
-def report_outcomes():
-    yield
-    if PROFILE == 'long':
-        print(f'\ntracking files and strike bags: {OUTCOMES["analysed"]} analysed (every '
-              f'number possible), {OUTCOMES["refused"]} refused with the reason')
-
-
-def analysed_plausibly_or_refused(path: Path) -> None:
+def analysed_plausibly_or_refused(path: Path) -> str:
     """What `mantis analyze FILE` does: read, analyse. Only bad input may be refused (an
     InputError naming it); what is accepted must be physically possible, checked here on its
-    own rather than trusting the analysis' own check."""
+    own rather than trusting the analysis' own check. Returns 'analysed' or 'refused'."""
     try:
         trial = load_trial_input(path)
         analysis, _, _ = analyse_trial(trial, {'d_t_mm': 23.0})
     except InputError:
-        OUTCOMES['refused'] += 1
-        return
-    OUTCOMES['analysed'] += 1
+        return 'refused'
     s = analysis.summary()
     assert 0.0 <= s['peak_tip_speed_mps'] <= 60.0, s
     assert 15.0 <= s['L1_mm'] <= 25.0, s
     assert 0.0 <= s['max_spring_energy_mJ'] <= 300.0, s
     times = [t for t in s['phase_start_s'].values() if t == t] + [s['peak_tip_speed_s']]
     assert times == sorted(times), s
+    return 'analysed'
 
 
 def write_tracking(tmp_path_factory, lines) -> Path:
@@ -366,39 +404,52 @@ def write_tracking(tmp_path_factory, lines) -> Path:
     return path
 
 
-@fuzz
-@given(cells=st.lists(st.tuples(st.integers(0, WINDOW[1] - WINDOW[0] - 1), st.integers(0, 12),
-                                NUMERIC_CELLS), min_size=1, max_size=30),
-       garbage=st.none() | st.tuples(st.integers(0, WINDOW[1] - WINDOW[0] - 1),
-                                     st.integers(0, 12), CELL_VALUES))
 def test_a_tracking_file_with_any_cells_changed_is_analysed_plausibly_or_refused(
-        tmp_path_factory, tracking_lines, cells, garbage):
-    rows = [line.split(b',') for line in tracking_lines[2:]]
-    for row, column, value in cells + ([garbage] if garbage else []):
-        if column < len(rows[row]):
-            rows[row][column] = as_bytes(value)
-    path = write_tracking(tmp_path_factory, tracking_lines[:2] + [b','.join(r) for r in rows])
-    analysed_plausibly_or_refused(path)
+        tmp_path_factory, tracking_lines):
+    outcomes = Counter()
+
+    @fuzz
+    @given(cells=st.lists(st.tuples(st.integers(0, WINDOW[1] - WINDOW[0] - 1),
+                                    st.integers(0, 12), NUMERIC_CELLS), min_size=1, max_size=30),
+           garbage=st.none() | st.tuples(st.integers(0, WINDOW[1] - WINDOW[0] - 1),
+                                         st.integers(0, 12), CELL_VALUES))
+    def check(cells, garbage):
+        rows = [line.split(b',') for line in tracking_lines[2:]]
+        for row, column, value in cells + ([garbage] if garbage else []):
+            if column < len(rows[row]):
+                rows[row][column] = as_bytes(value)
+        path = write_tracking(tmp_path_factory,
+                              tracking_lines[:2] + [b','.join(r) for r in rows])
+        outcomes[analysed_plausibly_or_refused(path)] += 1
+
+    check()
+    both_outcomes(outcomes, 'analysed')
 
 
-@fuzz
-@given(line=st.integers(0, 1), edit=st.sampled_from(['replace', 'drop', 'insert', 'cell']),
-       text=CELL_VALUES, column=st.integers(0, 12))
 def test_a_tracking_file_with_any_header_is_analysed_plausibly_or_refused(
-        tmp_path_factory, tracking_lines, line, edit, text, column):
-    header = list(tracking_lines[:2])
-    if edit == 'replace':
-        header[line] = as_bytes(text)
-    elif edit == 'drop':
-        del header[line]
-    elif edit == 'insert':
-        header.insert(line, as_bytes(text))
-    else:
-        cells = header[line].split(b',')
-        cells[min(column, len(cells) - 1)] = as_bytes(text)
-        header[line] = b','.join(cells)
-    path = write_tracking(tmp_path_factory, header + tracking_lines[2:])
-    analysed_plausibly_or_refused(path)
+        tmp_path_factory, tracking_lines):
+    outcomes = Counter()
+
+    @fuzz
+    @given(line=st.integers(0, 1), edit=st.sampled_from(['replace', 'drop', 'insert', 'cell']),
+           text=CELL_VALUES, column=st.integers(0, 12))
+    def check(line, edit, text, column):
+        header = list(tracking_lines[:2])
+        if edit == 'replace':
+            header[line] = as_bytes(text)
+        elif edit == 'drop':
+            del header[line]
+        elif edit == 'insert':
+            header.insert(line, as_bytes(text))
+        else:
+            cells = header[line].split(b',')
+            cells[min(column, len(cells) - 1)] = as_bytes(text)
+            header[line] = b','.join(cells)
+        path = write_tracking(tmp_path_factory, header + tracking_lines[2:])
+        outcomes[analysed_plausibly_or_refused(path)] += 1
+
+    check()
+    both_outcomes(outcomes, 'analysed')
 
 
 # ----------------------------------------------------- a bag of a real strike, analysed
@@ -423,10 +474,10 @@ def strike_bag(tmp_path_factory, tracking_lines):
     return path
 
 
-def bag_analysed_plausibly_or_refused(bag: Path) -> None:
+def bag_analysed_plausibly_or_refused(bag: Path) -> str:
     with warnings.catch_warnings():
         warnings.simplefilter('ignore', TruncatedBagWarning)
-        analysed_plausibly_or_refused(bag)
+        return analysed_plausibly_or_refused(bag)
 
 
 def test_the_strike_bag_itself_is_analysed(strike_bag):
@@ -435,21 +486,32 @@ def test_the_strike_bag_itself_is_analysed(strike_bag):
     assert 20.0 < analysis.summary()['peak_tip_speed_mps'] < 30.0
 
 
-@fuzz
-@given(edits=BYTE_EDITS)
-def test_a_strike_bag_with_changed_bytes_is_analysed_plausibly_or_refused(strike_bag, edits):
-    bag = damaged_copy(strike_bag, changed_bytes(edits))
-    bag_analysed_plausibly_or_refused(bag)
-    shutil.rmtree(bag.parent)
+def test_a_strike_bag_with_changed_bytes_is_analysed_plausibly_or_refused(strike_bag):
+    outcomes = Counter()
+
+    @fuzz
+    @given(edits=BYTE_EDITS)
+    def check(edits):
+        bag = damaged_copy(strike_bag, changed_bytes(edits))
+        outcomes[bag_analysed_plausibly_or_refused(bag)] += 1
+        shutil.rmtree(bag.parent)
+
+    check()
+    both_outcomes(outcomes, 'analysed')
 
 
-@fuzz
-@given(chunk=st.integers(0, 10_000), where=st.floats(0.0, 1.0), value=st.integers(0, 255),
-       span=st.integers(1, 64))
-def test_a_strike_bag_changed_behind_a_valid_crc_is_analysed_plausibly_or_refused(
-        strike_bag, chunk, where, value, span):
+def test_a_strike_bag_changed_behind_a_valid_crc_is_analysed_plausibly_or_refused(strike_bag):
     """Marker and force payloads changed where no CRC sees it: every number the analysis
     then reports must still be one the robot can produce."""
-    bag = damaged_copy(strike_bag, changed_behind_crc(chunk, where, value, span))
-    bag_analysed_plausibly_or_refused(bag)
-    shutil.rmtree(bag.parent)
+    outcomes = Counter()
+
+    @fuzz
+    @given(chunk=st.integers(0, 10_000), where=st.floats(0.0, 1.0),
+           value=st.integers(0, 255), span=st.integers(1, 64))
+    def check(chunk, where, value, span):
+        bag = damaged_copy(strike_bag, changed_behind_crc(chunk, where, value, span))
+        outcomes[bag_analysed_plausibly_or_refused(bag)] += 1
+        shutil.rmtree(bag.parent)
+
+    check()
+    both_outcomes(outcomes, 'analysed')
