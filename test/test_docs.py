@@ -7,9 +7,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 #: Documents cited before the work that writes them has landed, and which work that is. A
 #: pending document may exist already; once it does, its entry can go.
-PENDING = {
-    'docs/data_path.md': 'one type and one unit per layer for marker and force data',
-}
+PENDING: dict = {}
 
 #: Where the code and the documents are (test/data holds copies of outside files as they are).
 CODE_GLOBS = ('mantis_rig/**/*.py', 'mantis_sim/**/*.py', 'bench/**/*.py', 'launch/*.py',
