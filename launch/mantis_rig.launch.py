@@ -12,7 +12,7 @@ and `supervisor_node`, a process each. One params file with a section per node, 
 `mantis bringup` writes it. The device nodes come up unconfigured; the supervisor configures
 and activates them. Other supervisor parameters: `ros2 param set /supervisor_node ...`.
 
-Checked only statically (test/test_launch_file.py parses this file: its executables against
+Checked only statically (test/unit/test_launch_file.py parses this file: its executables against
 setup.py's console scripts, its parameters against the nodes' declared ones and against
 `mantis bringup`'s); `ros2 launch` is not installable from PyPI, so it has not been run here.
 The functions above `generate_launch_description` use nothing from `launch`: the check

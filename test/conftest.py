@@ -1,17 +1,27 @@
-"""Every ROS participant a test starts stays on loopback, on a domain no other test uses.
+"""Shared by every layer of the suite: the test data, and the DDS domains of the tests that use
+ROS.
 
-Each test claims a domain of its own (a lock no parallel pytest run can take) before it starts
-any ROS context or process, and gives it back afterwards; module fixtures, set up before that,
-run in a domain of their module's own (otherwise in the shell's ROS_DOMAIN_ID, which parallel
-workers all inherit). A domain per test, not per session:
-a participant that outlives its test (rclpy destroys the DDS participant only when its context
-is collected) must not answer the next test's service calls.
+The layers (docs/testing.md): ``test/unit`` (no DDS, no subprocess: a guard below fails a unit
+test that starts either), ``test/ros`` (ROS nodes, executors and bags in this process) and
+``test/system`` (whole programs: node processes, the installed package, clusters, the fuzz
+suite and the analyses of every real trial). Tests marked ``slow`` are left out of the inner
+loop by ``-m "not slow"``.
+
+ROS isolation: every ROS participant a test starts stays on loopback, on a domain no other test
+uses. A test under test/ros, a module marked ``ros`` elsewhere, or a test not yet placed in a
+layer (directly under test/) claims a domain of its own (a lock no parallel pytest run can
+take) before it starts any ROS context or process, and gives it back afterwards; module
+fixtures, set up before that, run in a domain of their module's own (otherwise in the shell's
+ROS_DOMAIN_ID, which parallel workers all inherit). A domain per test, not per session: a
+participant that outlives its test (rclpy destroys the DDS participant only when its context
+is collected) must not answer the next test's service calls. Unit tests claim nothing.
 
 The real trials the tests read are the project's own copies under test/data (``data_file``);
 a missing one fails the test that needs it, it is never skipped.
 """
 import os
 from pathlib import Path
+import subprocess
 
 import pytest
 
@@ -41,14 +51,68 @@ def _claimed_domain():
     release_domain(domain)
 
 
+# --------------------------------------------------------------------------------- layers
+TEST_DIR = Path(__file__).resolve().parent
+LAYERS = ('unit', 'ros', 'system')
+
+
+def layer(node) -> str | None:
+    """The layer a test or module is in ('unit', 'ros', 'system'); None directly under test/."""
+    parts = Path(node.path).resolve().relative_to(TEST_DIR).parts
+    return parts[0] if len(parts) > 1 and parts[0] in LAYERS else None
+
+
+def uses_ros(node) -> bool:
+    """Whether a test or module starts ROS participants: everything under test/ros, the
+    modules marked ``ros`` elsewhere, and, to be safe, a module not yet placed in a layer."""
+    where = layer(node)
+    return where == 'ros' or where is None or node.get_closest_marker('ros') is not None
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if layer(item) == 'ros':
+            item.add_marker(pytest.mark.ros)     # so that -m ros / -m "not ros" select by it
+
+
 @pytest.fixture(scope='module', autouse=True)
-def module_ros_domain():
-    yield from _claimed_domain()
+def module_ros_domain(request):
+    if uses_ros(request.node):
+        yield from _claimed_domain()
+    else:
+        yield None
 
 
 @pytest.fixture(autouse=True)
-def own_ros_domain():
-    yield from _claimed_domain()
+def own_ros_domain(request):
+    if uses_ros(request.node):
+        yield from _claimed_domain()
+    else:
+        yield None
+
+
+@pytest.fixture(autouse=True)
+def unit_tests_start_no_process_and_no_dds(request, monkeypatch):
+    """test/unit's rules, enforced: a unit test that starts a process (subprocess, fork,
+    multiprocessing) or a ROS context (DDS) fails, naming the layer it belongs in."""
+    if layer(request.node) != 'unit':
+        yield
+        return
+    import multiprocessing.process
+
+    import rclpy.context
+
+    def refused(what):
+        def refuse(*args, **kwargs):
+            raise AssertionError(f'a unit test starts no {what}: move it to test/ros or '
+                                 f'test/system (docs/testing.md)')
+        return refuse
+    monkeypatch.setattr(subprocess.Popen, '_execute_child', refused('subprocess'))
+    monkeypatch.setattr(os, 'fork', refused('process (fork)'))
+    monkeypatch.setattr(multiprocessing.process.BaseProcess, 'start',
+                        refused('process (multiprocessing)'))
+    monkeypatch.setattr(rclpy.context.Context, 'init', refused('ROS context (DDS)'))
+    yield
 
 
 def published_s12_run() -> dict:

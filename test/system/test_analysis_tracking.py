@@ -6,6 +6,8 @@ import pytest
 
 from mantis_rig.analysis import analyze_tracks, load_tracks
 
+pytestmark = pytest.mark.slow
+
 DATA = data_file('air_23mm_2p3mmps_trial1_markers.csv.gz')
 
 

@@ -51,14 +51,14 @@ from mantis_rig.recording import BagReader, TruncatedBagWarning, recover_bag
 from mantis_rig.recording.marker_block import concatenate, marker_block_from_msg
 from mantis_rig.recording.trial_summary import summarize
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 SCENE = 'reference_air_23mm'
 RTF = float(os.environ.get('MANTIS_TEST_RTF', '1.0'))
 FAST = 0.0      # real-time factor 0: as fast as the stack keeps up (what is not about pacing)
 TRIAL_TIMEOUT_S = 240.0
 FAST_RETURN = {STAGE_NODE: {'move_speed_m_per_s': 2.0e-3}}
 
-pytestmark = pytest.mark.timeout(600)
+pytestmark = [pytest.mark.timeout(600), pytest.mark.slow, pytest.mark.ros]
 
 
 @pytest.fixture

@@ -19,7 +19,7 @@ from mantis_rig.recording.trial_summary import summarize
 from mantis_rig.replay.qos import replay_qos
 from mantis_rig.replay.synthetic import write_synthetic_trial
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 PACKAGE = REPO / 'mantis_rig'
 CONTRACT = PACKAGE / 'contract.py'
 DOC = REPO / 'docs' / 'ros_interfaces.md'

@@ -24,6 +24,8 @@ from mantis_rig.recording.marker_block import (
     marker_blocks_to_msgs,
 )
 
+pytestmark = pytest.mark.slow
+
 DATA = data_file('air_23mm_2p3mmps_trial1_markers.csv.gz')
 N_FRAMES = 65255
 

@@ -22,7 +22,7 @@ FIXED = ['integration.solver=LSODA', 'integration.rtol=0.001']
 VARY = ['geometry.d_t_mm=19:25:4', 'geometry.contact_angle_deg=1:8:3']
 DASK = Path(sys.executable).with_name('dask')
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.timeout(300), pytest.mark.slow]
 
 
 def designs():

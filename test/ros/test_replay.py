@@ -26,7 +26,7 @@ from mantis_rig.replay import BagPlayer, PlaybackClock, ReplayError, replay_qos
 from mantis_rig.replay.schedule import REALTIME_PRIORITY, sleep_until
 from mantis_rig.replay.synthetic import write_synthetic_trial
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 TIMING_TOLERANCE_S = 1e-3
 MAX_ATTEMPTS = 3
 
@@ -154,6 +154,7 @@ def replay_and_rerecord(bag, out):
     return original_messages(out), result.stdout
 
 
+@pytest.mark.slow
 def test_replay_rerecorded_gives_same_messages_order_and_timing(trial_bag, tmp_path):
     """Same messages, same order, every message within 1 ms of its original relative time.
 
@@ -190,6 +191,7 @@ def test_replay_rerecorded_gives_same_messages_order_and_timing(trial_bag, tmp_p
     assert min(worst) < TIMING_TOLERANCE_S, f'median timing error per attempt (s): {worst}'
 
 
+@pytest.mark.slow
 def test_replay_node_plays_bag_from_parameters(trial_bag, ros_context):
     original = original_messages(trial_bag)
     recorder = Recorder(ros_context, trial_bag)
@@ -289,6 +291,7 @@ def test_nothing_to_replay_is_an_error(tmp_path):
 
 
 @pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+@pytest.mark.slow
 def test_a_signal_ends_a_slow_replay_at_once(trial_bag, signum):
     process = subprocess.Popen(
         [sys.executable, '-m', 'mantis_rig.cli', 'replay', str(trial_bag), '--rate', '0.01'],
@@ -353,6 +356,7 @@ def bag_with_a_time_jump(path):
     return path
 
 
+@pytest.mark.slow
 def test_a_log_time_jump_is_refused_or_skipped_as_asked(tmp_path):
     bag = bag_with_a_time_jump(tmp_path / 'jump')
     refused = run_cli('replay', bag)

@@ -5,7 +5,7 @@ file that is analysed gives only numbers the robot can produce.
 Property-based with hypothesis. The CI profile (default) is small and deterministic; the long
 profile runs by one command:
 
-    MANTIS_FUZZ_PROFILE=long .venv/bin/python -m pytest -q test/test_fuzz.py
+    MANTIS_FUZZ_PROFILE=long .venv/bin/python -m pytest -q test/system/test_fuzz.py
 
 Each case writes the damaged copy to a fresh directory; the source files are never touched.
 Damaged spreadsheets (.xlsx) are covered by test_tracker_export.py (seeded damaged copies of
@@ -36,14 +36,14 @@ from mantis_sim.errors import InputError
 from mantis_sim.parameters import ParameterError
 from mantis_sim.scene import SceneError, load_scene_file
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 settings.register_profile('ci', max_examples=60, derandomize=True, deadline=None,
                           suppress_health_check=[HealthCheck.too_slow])
 settings.register_profile('long', max_examples=3000, deadline=None,
                           suppress_health_check=[HealthCheck.too_slow])
 PROFILE = os.environ.get('MANTIS_FUZZ_PROFILE', 'ci')
 
-pytestmark = pytest.mark.timeout(600)
+pytestmark = [pytest.mark.timeout(600), pytest.mark.slow]
 
 
 def fuzz(test):

@@ -191,6 +191,6 @@ def test_mantis_says_each_error_in_one_line_with_its_exit_status(monkeypatch, ca
 
 
 def test_the_usage_exit_status_is_defined_once():
-    root = Path(__file__).resolve().parents[1] / 'mantis_rig'
+    root = Path(__file__).resolve().parents[2] / 'mantis_rig'
     defined = [p for p in root.rglob('*.py') if 'USAGE_ERROR = ' in p.read_text()]
     assert defined == [root / 'errors.py'], defined

@@ -27,11 +27,11 @@ from mantis_rig.contract import (
 )
 from mantis_rig.recording import BagReader
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 COLCON_VENV = REPO / '.venv-colcon'
 PACKAGE = 'mantis_rig'
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.timeout(300), pytest.mark.slow, pytest.mark.ros]
 
 # A trial as a user runs it with `ros2 service call /supervisor/start_trial std_srvs/srv/Trigger`
 # and watches /supervisor/state; run by the install space's Python.

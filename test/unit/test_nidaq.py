@@ -5,7 +5,6 @@ import importlib
 import importlib.util
 import inspect
 import os
-import subprocess
 import sys
 
 import fakes_nidaq
@@ -24,7 +23,7 @@ from mantis_rig.hardware.nidaq_force import NidaqForceDaq
 from mantis_rig.hardware.nidaq_trigger import NidaqCameraTrigger
 
 VOLTS_PER_SAMPLE = 1e-4
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 def ramp_v(index):
@@ -459,17 +458,6 @@ def test_missing_driver_is_a_clear_error(monkeypatch):
         NidaqForceDaq(CONFIG).open()
 
 
-def test_modules_import_without_nidaqmx():
-    code = ("import sys; sys.modules['nidaqmx'] = None\n"
-            "import mantis_rig.hardware.nidaq, mantis_rig.hardware.nidaq_force, "
-            "mantis_rig.hardware.nidaq_trigger as t\n"
-            "t.NidaqCameraTrigger('Dev1/ctr0').close()\n"
-            "assert sys.modules['nidaqmx'] is None\n")
-    result = subprocess.run([sys.executable, '-c', code], cwd=REPO, capture_output=True,
-                            text=True, timeout=120)
-    assert result.returncode == 0, result.stderr
-
-
 # --- the fake against the real nidaqmx 1.7.0 (skipped where it is not installed) ---------------
 
 def real_nidaqmx():
@@ -583,12 +571,3 @@ def test_fake_constants_and_error_codes_match_the_real_ones():
     used.update({code: name for name, code in fakes_nidaq.FAKE_ERROR_CODES.items()})
     for code, name in used.items():
         assert DAQmxErrors[name].value == code, name
-
-
-def test_real_nidaqmx_open_failure_is_a_device_error():
-    """No NI-DAQmx driver (CI) or no such device (the rig): DeviceError, nothing left open."""
-    real_nidaqmx()
-    daq = NidaqForceDaq(replace(CONFIG, channel='NoSuchDev9/ai0'))
-    with pytest.raises(DeviceError, match='NI-DAQmx|-200220'):
-        daq.open()
-    daq.close()

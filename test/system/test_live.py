@@ -25,12 +25,12 @@ from mantis_rig.contract import FORCE_BLOCK, JOINT_STATE, resolve
 from mantis_rig.recording import BagReader
 from mantis_rig.recording.force_block import force_block_from_msg
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 SUBPROTOCOL = 'foxglove.sdk.v1'
 MESSAGE_DATA = 0x01
 WANTED = (resolve(FORCE_BLOCK), resolve(JOINT_STATE))
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.timeout(300), pytest.mark.slow, pytest.mark.ros]
 
 
 def free_port() -> int:

@@ -1,9 +1,11 @@
 """Every document the project cites exists: each ``docs/...`` path named in the code, the
-README and docs/, and each relative link (with its #anchor) in the README and docs/."""
+README and docs/, each ``test/...py`` or ``bench/...py`` file the README and docs/ name (so
+that a moved test or script does not leave a stale reference), and each relative link (with its
+#anchor) in the README and docs/."""
 from pathlib import Path
 import re
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 #: Documents cited before the work that writes them has landed, and which work that is. A
 #: pending document may exist already; once it does, its entry can go.
@@ -15,6 +17,7 @@ CODE_GLOBS = ('mantis_rig/**/*.py', 'mantis_sim/**/*.py', 'bench/**/*.py', 'laun
 DOC_GLOBS = ('README.md', 'docs/**/*.md')
 
 DOCS_PATH = re.compile(r'(?<![\w-])docs/[\w./-]*')
+SOURCE_PATH = re.compile(r'(?<![\w./-])(?:test|bench)/[\w/-]*\.py\b')
 LINK = re.compile(r'\]\(([^)\s]+)\)')
 
 
@@ -35,6 +38,15 @@ def _docs_paths(text):
         if path.endswith('...'):
             continue
         yield path
+
+
+def test_every_test_and_bench_file_the_documents_name_exists():
+    missing = []
+    for path in _files(DOC_GLOBS):
+        for cited in sorted(set(SOURCE_PATH.findall(path.read_text()))):
+            if not (REPO / cited).is_file():
+                missing.append(f'{path.relative_to(REPO)}: {cited}')
+    assert not missing, 'named but not in the repository:\n' + '\n'.join(missing)
 
 
 def _slug(heading):
@@ -79,6 +91,8 @@ def test_the_checks_see_a_missing_document_and_a_missing_heading(tmp_path):
     """The two checks above would fail on a document or a heading that is not there."""
     assert list(_docs_paths('see `docs/no_such.md`, and docs/rig.md.')) == \
         ['docs/no_such.md', 'docs/rig.md']
+    assert SOURCE_PATH.findall('`test/unit/test_sim.py`, bench/bench_trial.py; x/test/y.py') == \
+        ['test/unit/test_sim.py', 'bench/bench_trial.py']
     doc = tmp_path / 'a.md'
     doc.write_text('# The fuzz suite\'s long profile\n## On a ROS 2 Jazzy install\n')
     assert _anchors(doc) == {'the-fuzz-suites-long-profile', 'on-a-ros-2-jazzy-install'}

@@ -408,6 +408,7 @@ def _mutations(data: bytes, rng) -> bytes:
 
 
 @pytest.mark.parametrize('suffix, copies', [('.csv', 200), ('.xlsx', 20)])
+@pytest.mark.slow
 def test_damaged_copies_are_read_or_refused(tmp_path, suffix, copies):
     """Seeded damaged copies of a real export: each is read into tracks that pass their own
     checks (finite, strictly increasing times; no (-1, -1) left as a position) or refused

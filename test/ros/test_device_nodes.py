@@ -254,6 +254,7 @@ def trial():
     return dict(rig=rig, trigger=trigger, stop=stop)
 
 
+@pytest.mark.slow
 def test_force_stream_rises_and_drops_at_the_release_without_gaps(trial):
     rig = trial['rig']
     blocks = [force_block_from_msg(m) for m in rig.messages(resolve(FORCE_BLOCK))]
@@ -473,6 +474,7 @@ def test_services_refuse_in_the_wrong_state(rig):
 
 # --- hardware backends against the KDC101 emulator and the fake nidaqmx ----------------------
 
+@pytest.mark.slow
 def test_hardware_stage_node_on_the_kdc101_emulator(rig):
     from fakes.kdc101_emulator import Kdc101Emulator
     emulator = Kdc101Emulator(position_mm=5.0).start()

@@ -169,6 +169,7 @@ def test_open_identifies_enables_and_starts_status_updates(make_emulator, make_s
     assert state.fault is None
 
 
+@pytest.mark.slow
 def test_keepalive_keeps_status_updates_coming(make_emulator, make_stage):
     emu = make_emulator(ack_timeout_s=1.0)
     stage = make_stage(emu.port, keepalive_period_s=0.3)
@@ -191,6 +192,7 @@ def test_emulator_stops_status_updates_without_acks(make_emulator):
         assert port.read(20) == b''
 
 
+@pytest.mark.slow
 def test_missing_status_updates_end_the_link(make_emulator, make_stage):
     emu = make_emulator(ack_timeout_s=0.5)
     stage = make_stage(emu.port, keepalive_period_s=30.0, status_timeout_s=1.0)
@@ -200,6 +202,7 @@ def test_missing_status_updates_end_the_link(make_emulator, make_stage):
     assert_link_closed(stage, emu)
 
 
+@pytest.mark.slow
 def test_home(make_emulator, make_stage):
     emu = make_emulator(position_mm=3.0)            # stored home velocity: 20 mm/s
     stored = dict(emu.homeparams)

@@ -24,6 +24,8 @@ from mantis_rig.analysis import AnalysisParams, analyze_tracks, load_tracks
 from mantis_rig.analysis.report import ImplausibleResult, check_plausible
 from mantis_rig.analysis.tracking import MarkerTracks
 
+pytestmark = pytest.mark.slow
+
 # The authors' values of each file (test/data/authors_values.csv, from the READMEs).
 AUTHORS = authors_values()
 

@@ -12,7 +12,7 @@ import pytest
 
 from mantis_rig.analysis.sim_camera_study import study
 
-pytestmark = pytest.mark.timeout(120)
+pytestmark = [pytest.mark.timeout(120), pytest.mark.slow]
 
 
 @pytest.fixture(scope='module')

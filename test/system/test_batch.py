@@ -63,6 +63,7 @@ def pair_report():
 
 
 # --------------------------------------------------------------------------- the batch
+@pytest.mark.slow
 def test_batch_writes_one_row_per_trial_and_reports_refusals(tmp_path, capsys, pair_report):
     trials = tmp_path / 'trials'
     (trials / 'nested' / 'deeper').mkdir(parents=True)
@@ -125,6 +126,7 @@ def test_batch_refuses_what_analysis_refuses_and_what_crashes(tmp_path, monkeypa
     assert row['n_frames'] == 16266 and row['trial'] == 'air_23mm_19kfps_pair_track'
 
 
+@pytest.mark.slow
 def test_table_on_stdout_and_conditions_for_every_trial(capsys, tmp_path, pair_report):
     code, out, err = run(capsys, 'analyze', PAIR_CSV, '--table', '-')
     assert code == 0, err

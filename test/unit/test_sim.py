@@ -37,7 +37,7 @@ from mantis_sim.parameters import ParameterError
 from mantis_sim.results import JSON_KEYS, simulate
 from mantis_sim.scene import SceneError, available_scenes, load_scene
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 PHASE_ORDER = ('I', 'II', 'III', 'IV')
 # The published robot (rigid tendon): the engine's hard cases run on it.

@@ -35,7 +35,7 @@ from mantis_rig.recording.force_block import force_block_from_msg, force_block_t
 from mantis_rig.recording.mcap_scan import scan_mcap
 from mantis_rig.recording.recover import main_recover
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 T0_NS = 1_700_000_000_000_000_000
 TYPES = {
     '/force': 'std_msgs/msg/Float64MultiArray',

@@ -25,7 +25,7 @@ from mantis_rig.nodes.trial_client import TrialClient
 from mantis_rig.recording import BagReader
 from mantis_rig.recording.trial_summary import summarize
 
-pytestmark = pytest.mark.timeout(600)
+pytestmark = [pytest.mark.timeout(600), pytest.mark.slow, pytest.mark.ros]
 
 RIGS = {'/rig_a': 2.33, '/rig_b': 1.9}       # namespace -> pull speed, mm/s
 PROCESSES = {'/rig_a': 'single', '/rig_b': 'multi'}

@@ -35,7 +35,7 @@ SCENE = 'air_23mm_rig'
 RTF = float(os.environ.get('MANTIS_TEST_RTF', '1.0'))
 TRIAL_TIMEOUT_S = 240.0
 
-pytestmark = pytest.mark.timeout(600)
+pytestmark = [pytest.mark.timeout(600), pytest.mark.slow]
 
 
 @pytest.fixture(scope='module')

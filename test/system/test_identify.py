@@ -203,6 +203,7 @@ def test_a_free_parameter_must_name_a_numeric_key_and_known_groups():
 
 
 # --- the commands ---------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_compare_writes_errors_parity_and_a_trial_figure(tmp_path, capsys):
     out = tmp_path / 'cmp'
     code = mantis(['compare', '--strikes', str(data_file(TABLE)), '--processed',
@@ -220,6 +221,7 @@ def test_compare_writes_errors_parity_and_a_trial_figure(tmp_path, capsys):
     assert all(r['status'] == 'strike' for r in rows)
 
 
+@pytest.mark.slow
 def test_identify_writes_a_calibrated_scene_with_its_provenance(tmp_path, capsys):
     out = tmp_path / 'scenes'
     code = mantis(['identify', '--strikes', str(data_file(TABLE)), '--processed',
@@ -255,6 +257,7 @@ def test_identify_refuses_bad_input_before_any_work(tmp_path, capsys, extra, mes
     assert not (tmp_path / 'o').exists()
 
 
+@pytest.mark.slow
 def test_a_tracker_export_gives_the_strike_s_motion_through_the_rig_s_analysis():
     """`--export TRIAL=PATH`: the export analysed, timed from its own phase IV, cut to the
     strike: the body turns back and the arm swings out, as in the authors' record."""

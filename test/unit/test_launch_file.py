@@ -19,7 +19,7 @@ from mantis_rig.nodes.device_node import COMMON_PARAMETERS
 from mantis_rig.nodes.node_table import BY_NAME, DEVICES, SIM_RIG_PROCESS, SUPERVISOR, WORLD
 from mantis_rig.trial.conditions import PARAMETERS as SUPERVISOR_PARAMETERS
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 LAUNCH_FILE = REPO / 'launch' / 'mantis_rig.launch.py'
 LAUNCH_FREE = ('ARGUMENTS', 'DEVICE_NODES', 'processes', 'scene_conditions', 'node_parameters')
 BACKENDS = ('sim', 'hardware')

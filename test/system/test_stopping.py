@@ -36,12 +36,12 @@ from mantis_rig.nodes.trial_client import TrialClient
 from mantis_rig.recording import BagReader, TruncatedBagWarning
 from mantis_rig.recording import writer as writer_module
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 EXIT_BOUND_S = 8.0
 INTO_TRIAL_S = 3.0          # wall seconds after the bag is opened: homing, slack or pulling
 STAGE_STOPS_WITHIN_S = 0.1  # rig time
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.timeout(300), pytest.mark.slow, pytest.mark.ros]
 
 
 class TrialProcess:
