@@ -19,11 +19,7 @@ from machine import REPO, stamp
 from mantis_sim.scene import load_scene
 from mantis_sim.studies import identify as ident
 from mantis_sim.studies.parallel import ClusterMap
-from mantis_sim.studies.strikes import (
-    attach_processed_records,
-    phase_iv_times,
-    read_summary_table,
-)
+from mantis_sim.studies.strikes import read_strikes
 
 GROUPS = ('air_19mm', 'air_23mm', 'water_23mm')
 
@@ -45,9 +41,8 @@ def main() -> int:
     parser.add_argument('--iterations', type=int, default=6)
     parser.add_argument('--workers', type=int, default=None)
     args = parser.parse_args()
-    table = args.data / 'authors_summary_train.csv'
-    strikes = attach_processed_records(read_summary_table(table),
-                                       args.data / 'authors_processed', phase_iv_times(table))
+    strikes = read_strikes(args.data / 'authors_summary_train.csv',
+                           args.data / 'authors_processed')
     scenes = {g: load_scene(g) for g in GROUPS}
     params = free_parameters(scenes)
     if not params:

@@ -20,11 +20,7 @@ from mantis_sim.scene import load_scene
 from mantis_sim.studies import compare_plots, fidelity
 from mantis_sim.studies import identify as ident
 from mantis_sim.studies.parallel import ClusterMap
-from mantis_sim.studies.strikes import (
-    attach_processed_records,
-    phase_iv_times,
-    read_summary_table,
-)
+from mantis_sim.studies.strikes import read_strikes
 
 GROUPS = ('air_19mm', 'air_23mm', 'water_23mm')
 FIGURE_TRIALS = ('111219_11kfps_T_2X_A_1_1_2p3_-10_5_1', '0801319_19kfps_T_2X_A_1_1_2p3_-6_4',
@@ -107,9 +103,8 @@ def main() -> int:
                         default=REPO.parent / 'shared' / 'data' / 'real_trials')
     parser.add_argument('--workers', type=int, default=None)
     args = parser.parse_args()
-    table = args.data / 'authors_summary_train.csv'
-    strikes = attach_processed_records(read_summary_table(table),
-                                       args.data / 'authors_processed', phase_iv_times(table))
+    strikes = read_strikes(args.data / 'authors_summary_train.csv',
+                           args.data / 'authors_processed')
     shipped = {g: load_scene(g) for g in GROUPS}
     reference = {g: load_scene(f'reference_{g}') for g in GROUPS}
     with ClusterMap(None, args.workers, progress=True) as mapper:

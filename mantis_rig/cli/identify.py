@@ -27,9 +27,7 @@ from mantis_sim.studies.strikes import (
     RealStrike,
     StrikeDataError,
     StrikeSeries,
-    attach_processed_records,
-    phase_iv_times,
-    read_summary_table,
+    read_strikes,
 )
 
 
@@ -91,11 +89,7 @@ def _strike_arguments(parser) -> None:
 
 
 def _load_strikes(args) -> list[RealStrike]:
-    strikes = read_summary_table(args.strikes)
-    if args.processed is not None:
-        if not args.processed.is_dir():
-            raise StrikeDataError(f'--processed {args.processed}: no such folder')
-        strikes = attach_processed_records(strikes, args.processed, phase_iv_times(args.strikes))
+    strikes = read_strikes(args.strikes, args.processed)
     by_trial = {s.trial: i for i, s in enumerate(strikes)}
     for text in args.export:
         trial, sep, path = text.partition('=')

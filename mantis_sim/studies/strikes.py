@@ -218,6 +218,17 @@ def attach_processed_records(strikes: list[RealStrike], folder: Path,
     return out
 
 
+def read_strikes(table: Path, processed: Optional[Path] = None) -> list[RealStrike]:
+    """The strikes of a summary table, each with its processed record from the folder
+    ``processed`` where it has one (timed by the table's t_z1_s)."""
+    strikes = read_summary_table(table)
+    if processed is None:
+        return strikes
+    if not Path(processed).is_dir():
+        raise StrikeDataError(f'{processed}: no such folder of processed records')
+    return attach_processed_records(strikes, processed, phase_iv_times(table))
+
+
 def phase_iv_times(path: Path) -> dict[str, float]:
     """trial -> t_z1_s (phase IV in the record's time) from a summary table that has it."""
     with open(path, newline='', encoding='utf-8') as handle:
@@ -227,4 +238,4 @@ def phase_iv_times(path: Path) -> dict[str, float]:
 
 __all__ = ['LAB_SPRING_K_NMM_PER_RAD', 'LAB_THETA1_REST_RAD', 'RealStrike', 'StrikeDataError',
            'StrikeSeries', 'attach_processed_records', 'lab_spring_energy_mJ',
-           'phase_iv_times', 'read_processed_record', 'read_summary_table']
+           'phase_iv_times', 'read_processed_record', 'read_strikes', 'read_summary_table']
