@@ -52,6 +52,9 @@ def main(argv=None) -> int:
     except SimulationError as exc:
         _say(f'mantis {args.command}: simulation failed: {exc}')
         return 1
+    except KeyboardInterrupt:     # commands without a stage (sim, sweep, identify, ...)
+        _say(f'mantis {args.command}: interrupted; what it writes at the end was not written')
+        return 130
 
 
 def _say(line: str) -> None:

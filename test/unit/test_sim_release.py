@@ -188,3 +188,14 @@ def test_a_loose_tolerance_does_not_chatter_at_the_release(solver):
     assert m['strike_reached'] and len(m['events']) <= 8
     tight = sim('air_23mm', 'integration.rtol=1e-7').metrics
     assert m['peak_tip_speed_mps'] == pytest.approx(tight['peak_tip_speed_mps'], rel=0.01)
+
+
+def test_ctrl_c_in_a_command_without_a_stage_is_one_line_and_130(monkeypatch, capsys):
+    from mantis_rig.cli import sim as sim_cli
+
+    def interrupted(args):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(sim_cli, 'run_sim', interrupted)
+    assert mantis(['sim', '--scene', REF]) == 130
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and err.startswith('mantis sim: interrupted')
