@@ -73,6 +73,17 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if layer(item) == 'ros':
             item.add_marker(pytest.mark.ros)     # so that -m ros / -m "not ros" select by it
+    # The slow modules first, then those holding a slow test, then the rest, each module kept
+    # whole: scripts/test.sh hands modules out to its workers in this order (pytest-xdist,
+    # --dist loadfile --no-loadscope-reorder). A long module handed out last would run alone at
+    # the end while the other workers idle; handed out first, the quick ones fill in around it.
+    slow_modules = {item.module for item in items if item.get_closest_marker('slow')}
+
+    def rank(item):
+        if item.getparent(pytest.Module).get_closest_marker('slow'):
+            return 0
+        return 1 if item.module in slow_modules else 2
+    items.sort(key=rank)
 
 
 @pytest.fixture(scope='module', autouse=True)
