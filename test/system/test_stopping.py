@@ -210,7 +210,8 @@ def test_a_node_process_killed_by_its_own_signal_aborts_the_trial(trial):
     os.kill(rig, signal.SIGTERM)
     status = run.wait(timeout_s=60.0)
     stderr = '\n'.join(run.stderr)
-    assert status == RIG_FAULT, stderr
+    # one run in ~20 under heavy load ended 1 with nothing on stderr: show the outcome too
+    assert status == RIG_FAULT, stderr + '\nstdout:\n' + '\n'.join(run.stdout)
     assert 'Traceback' not in stderr, stderr
     ours = [line for line in run.stderr if line.startswith('mantis trial: ')]
     assert len(ours) == 1 and 'sim_rig (exit 143)' in ours[0], stderr
