@@ -20,6 +20,7 @@ from collections.abc import Callable, Iterable
 from concurrent.futures import BrokenExecutor, ProcessPoolExecutor, as_completed
 import csv
 import math
+import multiprocessing
 import os
 from pathlib import Path, PureWindowsPath
 import sys
@@ -266,7 +267,11 @@ def run_batch(trials: list, given: dict | None = None, frame_rate_hz: float | No
         return rows
     # Largest first: the long trials start early and the short ones fill in the end.
     order = sorted(range(len(trials)), key=lambda i: -_size(trials[i]))
-    pool = ProcessPoolExecutor(max_workers=jobs)
+    # forkserver, not fork: the caller may run threads (rclpy's, a live relay's, a test runner's)
+    # and a child forked from a threaded process can inherit a lock held mid-way or crash; one
+    # CI run saw a worker die of a segmentation fault and refuse every trial.
+    pool = ProcessPoolExecutor(max_workers=jobs,
+                               mp_context=multiprocessing.get_context('forkserver'))
     try:
         futures = {pool.submit(analyse_one, str(trials[i]), given, frame_rate_hz,
                                length_unit): i for i in order}

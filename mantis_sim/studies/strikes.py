@@ -127,8 +127,9 @@ def read_summary_table(path: Path) -> list[RealStrike]:
     path = Path(path)
     try:
         with open(path, newline='', encoding='utf-8') as handle:
-            rows = list(csv.DictReader(handle))
-            header = list(rows[0]) if rows else []
+            reader = csv.DictReader(handle)
+            rows = list(reader)
+            header = [str(c) for c in reader.fieldnames or []]
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise StrikeDataError(f'{path}: cannot read the summary table ({exc})') from None
     if not rows:
@@ -141,7 +142,13 @@ def read_summary_table(path: Path) -> list[RealStrike]:
                               f'{", ".join(header)}')
     strikes = []
     for number, row in enumerate(rows, start=2):
-        where = f'{path} row {number} ({row.get("trial") or "no trial name"})'
+        if None in row:         # more fields than the header names: a damaged line
+            raise StrikeDataError(f'{path} row {number}: {len(header) + len(row[None])} fields '
+                                  f'where the header names {len(header)}')
+        trial = (row.get('trial') or '').strip()
+        where = f'{path} row {number} ({trial or "no trial name"})'
+        if not trial:
+            raise StrikeDataError(f'{where}: column trial is empty')
         medium = (row.get('medium') or '').strip()
         if medium not in MEDIA:
             raise StrikeDataError(f'{where}: medium {medium!r} is not one of {", ".join(MEDIA)}')
@@ -152,7 +159,7 @@ def read_summary_table(path: Path) -> list[RealStrike]:
         values = {attr: _number(row.get(col, ''), where, col, False)
                   for col, attr in SUMMARY_VALUES.items()}
         strikes.append(RealStrike(
-            trial=row['trial'].strip(), medium=medium,
+            trial=trial, medium=medium,
             d_t_mm=_check_range(_number(row['d_t_mm'], where, 'd_t_mm', True), 'd_t_mm', where),
             contact_angle_deg=_check_range(
                 _number(row['contact_angle_deg'], where, 'contact_angle_deg', True),

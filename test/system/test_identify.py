@@ -286,3 +286,14 @@ def test_the_shipped_scenes_are_the_identified_robot_with_their_provenance(group
                                                    scene.geometry.d_t_mm, 3.0, 2.3),
                                  series=False)
     assert m.status == 'strike' and m.spring_energy_mJ > 60
+
+
+def test_a_header_damaged_into_an_extra_field_is_refused_not_a_crash(tmp_path):
+    """The fuzzed table above found it: a flipped byte in the header made a line longer than
+    the header, and the refusal itself crashed on the extra fields' missing name."""
+    content = bytearray(data_file(TABLE).read_bytes())
+    content[19] ^= 1                        # ',' -> '-' joins two header names
+    path = tmp_path / 'flipped.csv'
+    path.write_bytes(bytes(content))
+    with pytest.raises(StrikeDataError, match='fields where the header names|missing column'):
+        read_summary_table(path)
