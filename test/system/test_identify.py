@@ -116,7 +116,10 @@ def test_damaged_processed_records_are_refused(tmp_path):
         read_processed_record(record(AIR23), 99.0)
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+# derandomized, as the fuzz suite's CI profile: the same examples every run (a new one found by
+# chance would make CI flaky; the one found so far is the test below it)
+@settings(max_examples=40, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow,
                                                                   HealthCheck.function_scoped_fixture])
 @given(cut=st.integers(0, 3000), flips=st.lists(st.tuples(st.integers(0, 2999),
                                                           st.integers(1, 255)), max_size=8))
