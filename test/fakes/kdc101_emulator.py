@@ -186,6 +186,12 @@ class Kdc101Emulator:
         with self._lock:
             self._vanish = True
 
+    def vanish_at(self, position_mm: float) -> None:
+        """Unplug the USB cable when a move first passes this position (mm), whatever else
+        the host is doing then."""
+        with self._lock:
+            self._vanish_at = position_mm * self.counts_per_mm
+
     # --- emulator thread ---
 
     def _run(self) -> None:
@@ -318,6 +324,9 @@ class Kdc101Emulator:
             elif self._direction < 0 and new <= self._rev_switch:
                 new, switch = self._rev_switch, 'reverse'
         self._position = new
+        unplug = getattr(self, '_vanish_at', None)
+        if unplug is not None and min(new - step, new) <= unplug <= max(new - step, new):
+            self._vanish, self._vanish_at = True, None
         if switch:
             self._mode = None
             self._send(long_message(MOT_MOVE_STOPPED, self._status_data()))
