@@ -30,6 +30,8 @@ from mantis_sim.studies.strikes import (
     read_strikes,
 )
 
+from .options import add_cluster_options
+
 
 def add_commands(commands) -> None:
     ident_cmd = commands.add_parser(
@@ -82,9 +84,7 @@ def _strike_arguments(parser) -> None:
                              'e.g. air_23mm); repeatable')
     parser.add_argument('--group', action='append', default=[],
                         help='use only the strikes of this group (air_19mm, ...); repeatable')
-    parser.add_argument('--workers', type=int,
-                        help='local worker processes (default: one per core; 0: this process)')
-    parser.add_argument('--scheduler', help='an existing Dask scheduler, tcp://HOST:PORT')
+    add_cluster_options(parser)
     parser.add_argument('--json', action='store_true', help='print the result as JSON')
 
 

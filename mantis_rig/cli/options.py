@@ -23,6 +23,14 @@ def add_condition_options(parser) -> None:
 
 
 # ------------------------------------------------------- what a tracker export leaves out
+def add_cluster_options(parser) -> None:
+    """--scheduler and --workers: where many simulated strikes run (mantis_sim.studies)."""
+    parser.add_argument('--scheduler', metavar='tcp://HOST:PORT',
+                        help='an existing Dask scheduler (default: a local cluster)')
+    parser.add_argument('--workers', type=int,
+                        help='local workers (default: one per core; 0: this process only)')
+
+
 def positive_float(text):
     try:
         value = float(text)

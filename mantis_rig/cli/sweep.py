@@ -4,6 +4,8 @@ from __future__ import annotations
 from pathlib import Path
 import sys
 
+from .options import add_cluster_options
+
 
 def add_commands(commands) -> None:
     sweep = commands.add_parser(
@@ -28,10 +30,7 @@ def add_commands(commands) -> None:
     sweep.add_argument('--solver', help='integrator (instead of --accuracy)')
     sweep.add_argument('--rtol', type=float, help='relative tolerance (instead of --accuracy)')
     sweep.add_argument('--out', type=Path, required=True, help='results table (.parquet)')
-    sweep.add_argument('--scheduler', metavar='tcp://HOST:PORT',
-                       help='an existing Dask scheduler (default: a local cluster)')
-    sweep.add_argument('--workers', type=int,
-                       help='local workers (default: one per core; 0: this process only)')
+    add_cluster_options(sweep)
     sweep.add_argument('--chunk-size', type=int, help='designs per task (default: by cost)')
     sweep.add_argument('--quiet', action='store_true', help='no progress bar')
     sweep.set_defaults(run=run_sweep_command)
