@@ -60,6 +60,10 @@ class Mode:
     def copy(self) -> Mode:
         return Mode(self.latched, self.taut, self.saturated, self.stuck_at, self.slip)
 
+    def held_angle(self, contact_angle: float) -> float:
+        """theta3 of an arm held still: where it is stuck, else on the contact."""
+        return contact_angle if self.stuck_at is None else self.stuck_at
+
 
 @dataclass
 class Segment:
@@ -96,7 +100,7 @@ class HybridSimulator:
         self.model = Model(scene)
         integ = scene.integration
         self.method, self.rtol, self.atol_scale = integ.solver, integ.rtol, integ.atol_scale
-        self.t_end, self._horizon_reason = self._horizon(scene)
+        self.t_end, self._horizon_cause, self._horizon_kind = self._horizon(scene)
         self.post_peak = integ.post_peak_ms
         self.dense = dense
         self.separation = max(SEPARATION, self.rtol * self.model.mech.d_t)
@@ -112,25 +116,25 @@ class HybridSimulator:
         from scipy.integrate import solve_ivp
         self._solve_ivp = solve_ivp
 
-    def _horizon(self, scene: Scene) -> tuple[float, str]:
-        """(end time in ms, what ends a run there without a strike): integration.t_end_s if
-        given, else the time the stage takes to use up its travel; no fixed limit cuts off a
-        slow pull."""
+    def _horizon(self, scene: Scene) -> tuple[float, str, str]:
+        """(end time in ms, what ends a run there, and its kind: 'cap', 'still' or 'travel'):
+        integration.t_end_s if given, else the time the stage takes to use up its travel; no
+        fixed limit cuts off a slow pull."""
         drive = scene.drive
         if scene.integration.t_end_s is not None:
             return (scene.integration.t_end_s * 1e3,
-                    f'no strike within integration.t_end_s = {scene.integration.t_end_s:g} s')
+                    f'no strike within integration.t_end_s = {scene.integration.t_end_s:g} s',
+                    'cap')
         travel = drive.travel_mm - drive.start_position_mm
         t_travel = self.model.drive.time_to_pull(travel)
         if math.isinf(t_travel):
             return (STILL_STAGE_HORIZON_MS,
                     f'the stage does not pull (drive.pull_speed_mm_per_s = '
-                    f'{drive.pull_speed_mm_per_s:g}): the arm was never released')
+                    f'{drive.pull_speed_mm_per_s:g})', 'still')
         return (t_travel,
                 f'the stage used up its travel ({travel:g} mm from drive.start_position_mm = '
                 f'{drive.start_position_mm:g} to drive.travel_mm = {drive.travel_mm:g}, '
-                f'{t_travel * 1e-3:.3g} s at {drive.pull_speed_mm_per_s:g} mm/s) before the '
-                f'latch released the arm')
+                f'{t_travel * 1e-3:.3g} s at {drive.pull_speed_mm_per_s:g} mm/s)', 'travel')
 
     # --- mode systems ---------------------------------------------------------------------------
     def _constrained(self, mode: Mode) -> bool:
@@ -218,7 +222,7 @@ class HybridSimulator:
                 event('arm_stops', -mode.slip, lambda t, y: y[3] + mode.slip * resolution)
         if m.unilateral:
             def stretch(t, y):
-                th3 = m.contact_angle if mode.latched else y[1]
+                th3 = mode.held_angle(m.contact_angle) if mode.latched else y[1]
                 return m.mech.tendon_length(y[0], th3) - m.free_length(t)[0]
 
             if mode.saturated:
@@ -298,12 +302,8 @@ class HybridSimulator:
         """The free arm has come to rest relative to the body (pivot_friction): it sticks
         where it is if the friction can hold it there, or moves on the way it is pushed."""
         at_contact = s[1] - self.model.contact_angle <= EVENT_OVERLAP
-        stuck = Mode(True, mode.taut, mode.saturated,
-                     stuck_at=None if at_contact else s[1])
-        if self._constrained(stuck):
-            self.model.theta1_guess = s[0]
-            self._constrained_memo.clear()
-        held = self._dynamics(stuck, t, tuple(self._pack(stuck, s)))
+        held = self._state_dynamics(Mode(True, mode.taut, mode.saturated,
+                                         stuck_at=None if at_contact else s[1]), t, s)
         if at_contact and self.model.latch_margin(held) > 0.0:
             mode.latched, mode.stuck_at = True, None     # back on the body, held there
         elif not at_contact and abs(held.contact_torque_Nmm) < self.model.friction_limit(held):
@@ -438,12 +438,15 @@ class HybridSimulator:
         run = self.run_data
         run.wall_time_s = time.perf_counter() - start
         if math.isnan(run.peak_time_ms):
-            released = 'II' in run.phase_start_ms
-            run.end_reason = (self._horizon_reason if not released else
-                              self._horizon_reason.replace(
-                                  'before the latch released the arm',
-                                  'after the release, before a strike')
-                              .replace('the arm was never released', 'no strike followed'))
+            cause, kind = self._horizon_cause, self._horizon_kind
+            if kind == 'cap':
+                run.end_reason = cause
+            elif 'II' in run.phase_start_ms:
+                run.end_reason = f'{cause}: the arm was released, but no strike followed'
+            elif kind == 'travel':
+                run.end_reason = f'{cause} before the latch released the arm'
+            else:
+                run.end_reason = f'{cause}: the arm was never released'
         return run
 
     def advance(self, t_stop: float, stop_after_peak: bool = False) -> None:

@@ -240,7 +240,7 @@ def identify(model: StrikeModel, initial: Optional[Sequence[float]] = None,
     x0 = np.clip(x0, lower, upper)
     started = time.monotonic()
     cache: dict[bytes, np.ndarray] = {}
-    last_jacobian: list[np.ndarray] = []
+    last_jacobian: dict[bytes, np.ndarray] = {}      # the last one, by the point it is at
 
     def steps(x):
         step = relative_step * np.maximum(np.abs(x), 0.05 * (upper - lower))
@@ -264,14 +264,18 @@ def identify(model: StrikeModel, initial: Optional[Sequence[float]] = None,
             cache[x.tobytes()] = results.pop(0)
         base = cache[x.tobytes()]
         jacobian = np.column_stack([(r - base) / h[i] for i, r in enumerate(results)])
-        last_jacobian[:] = [jacobian]
+        last_jacobian.clear()
+        last_jacobian[x.tobytes()] = jacobian
         return jacobian
 
     scale = np.maximum(np.abs(x0), 0.05 * (upper - lower))
     solution = least_squares(fun, x0, jac=jac, bounds=(lower, upper), x_scale=scale,
                              max_nfev=max_iterations, method='trf')
     x = solution.x
-    jacobian = last_jacobian[0] if last_jacobian else jac(x)
+    # at the solution itself: the optimiser may stop on a step it accepted after its last one
+    jacobian = last_jacobian.get(x.tobytes())
+    if jacobian is None:
+        jacobian = jac(x)
     residual = fun(x)
     std_errors, correlation = _uncertainty(jacobian, residual, len(x))
     simulated = model.simulate([x])[0]
