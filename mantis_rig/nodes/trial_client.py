@@ -1,5 +1,12 @@
 """TrialClient: a small node that starts a trial through /supervisor/start_trial and follows
-/supervisor/state until the trial ends (for `mantis trial` and the tests)."""
+/supervisor/state until the trial ends (for `mantis trial` and the tests).
+
+A service's answer can be lost: Fast DDS drops a response when the server has not yet matched the
+client's response reader (rmw_fastrtps waits about 100 ms, then "client will not receive
+response"), which a loaded machine with the supervisor in its own process does hit. So a call
+also ends when the supervisor's own publications show that the request took effect: its
+diagnostics counting one trial more (with the new bag), or its state reaching an end.
+"""
 from __future__ import annotations
 
 import threading
@@ -15,6 +22,8 @@ from mantis_rig import contract
 from .lean_node import WithoutDefaultEventHandlers
 from .supervisor_node import STATUS_NAME
 
+ANSWER_GRACE_S = 2.0    # how long an answer is awaited before the supervisor's publications count
+
 
 class TrialClient(WithoutDefaultEventHandlers, Node):
     def __init__(self, node_name: str = contract.TRIAL_CLIENT_NODE, **kwargs):
@@ -28,6 +37,8 @@ class TrialClient(WithoutDefaultEventHandlers, Node):
         self.create_subscription(String, c.SUPERVISOR_STATE.name, self._on_state,
                                  c.SUPERVISOR_STATE.qos.subscriber())
         self.reason = ''            # the supervisor's reason for its state (its diagnostics)
+        self.supervisor_trials: int | None = None     # trials it has started (its diagnostics)
+        self.supervisor_bag = ''                      # its current or last bag (its diagnostics)
         self.create_subscription(DiagnosticArray, c.DIAGNOSTICS.name, self._on_diagnostics,
                                  c.DIAGNOSTICS.qos.subscriber())
 
@@ -39,29 +50,70 @@ class TrialClient(WithoutDefaultEventHandlers, Node):
     def _on_diagnostics(self, msg) -> None:
         for status in msg.status:
             if status.name == STATUS_NAME:
-                self.reason = next((kv.value for kv in status.values if kv.key == 'reason'), '')
+                values = {kv.key: kv.value for kv in status.values}
+                with self._changed:
+                    self.reason = values.get('reason', '')
+                    self.supervisor_trials = int(values.get('trials') or 0)
+                    self.supervisor_bag = values.get('bag', '')
+                    self._changed.notify_all()
 
     def wait_for_supervisor(self, timeout_s: float = 60.0, alive=lambda: None) -> bool:
-        """Wait for /supervisor/start_trial; ``alive()`` may raise to stop waiting."""
+        """Wait for /supervisor/start_trial and for the supervisor's diagnostics (the count of
+        trials a start is judged against); ``alive()`` may raise to stop waiting."""
         deadline = time.monotonic() + timeout_s
-        while not self._start.wait_for_service(timeout_sec=0.5):
+        while not self._start.wait_for_service(timeout_sec=0.5) or \
+                self.supervisor_trials is None:
             alive()
             if time.monotonic() > deadline:
                 return False
         return True
 
     def call(self, which: str, timeout_s: float = 30.0) -> tuple[bool, str]:
-        """Call start_trial or abort; (success, message), or (False, why) on timeout."""
+        """Call start_trial or abort; (success, message), or (False, why) on timeout. Without
+        an answer, a call that the supervisor's publications show took effect succeeds."""
         client = {'start_trial': self._start, 'abort': self._abort}[which]
         name = self.resolve_service_name(client.srv_name)
         if not client.wait_for_service(timeout_sec=timeout_s):
             return False, f'{name} is not available after {timeout_s} s'
+        took_effect = {'start_trial': self._trial_started_since(self.supervisor_trials),
+                       'abort': self._trial_ended_since(len(self.states))}[which]
         future = client.call_async(Trigger.Request())
-        done = threading.Event()
-        future.add_done_callback(lambda _: done.set())
-        if not done.wait(timeout_s):
-            return False, f'{name} did not answer within {timeout_s} s'
+        future.add_done_callback(lambda _: self._notify())
+        called = time.monotonic()
+        with self._changed:
+            while not future.done():
+                waited = time.monotonic() - called
+                effect = took_effect() if waited >= ANSWER_GRACE_S else None
+                if effect is not None:
+                    self.get_logger().warning(f'{name} did not answer; {effect}')
+                    return True, effect
+                if waited >= timeout_s:
+                    return False, f'{name} did not answer within {timeout_s} s'
+                next_look = ANSWER_GRACE_S if waited < ANSWER_GRACE_S else timeout_s
+                self._changed.wait(min(next_look, timeout_s) - waited)
         return future.result().success, future.result().message
+
+    def _notify(self) -> None:
+        with self._changed:
+            self._changed.notify_all()
+
+    def _trial_started_since(self, trials_before: int | None):
+        """What the supervisor's diagnostics say of a trial started since it had started
+        ``trials_before`` (None: never heard, nothing to judge by)."""
+        def started() -> str | None:
+            if trials_before is None or self.supervisor_trials is None or \
+                    self.supervisor_trials <= trials_before or not self.supervisor_bag:
+                return None
+            return f'trial started; logging to {self.supervisor_bag}'
+        return started
+
+    def _trial_ended_since(self, first_state: int):
+        """The end of a trial heard at or after index ``first_state`` of self.states."""
+        def ended() -> str | None:
+            final = next((s for s in self.states[first_state:] if s in ('done', 'aborted')),
+                         None)
+            return None if final is None else f'the trial ended ({final})'
+        return ended
 
     def wait_for_state(self, states, after: int = 0, timeout_s: float = 120.0) -> str | None:
         """The first state in ``states`` heard at or after index ``after`` of self.states."""

@@ -480,3 +480,63 @@ def test_a_domain_another_process_just_left_is_not_claimed_next():
     mine = claim_free_domain()
     release_domain(mine)
     assert mine != int(left.stdout)
+
+
+class _SilentSupervisor:
+    """A supervisor whose answers to start_trial never arrive (Fast DDS drops a response the
+    server cannot yet deliver): the request is held, as if its answer were lost, while the
+    diagnostics say, or do not say, that a trial started."""
+
+    def __init__(self, ros, starts_a_trial: bool):
+        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+        from rclpy.callback_groups import ReentrantCallbackGroup
+        from rclpy.node import Node
+        from std_srvs.srv import Trigger
+
+        from mantis_rig import contract
+        from mantis_rig.nodes.supervisor_node import STATUS_NAME
+
+        self.release = threading.Event()
+        self.trials = 0
+        node = ros(Node(contract.SUPERVISOR_NODE, context=ros.context))
+        group = ReentrantCallbackGroup()
+        publisher = node.create_publisher(DiagnosticArray, contract.DIAGNOSTICS.name,
+                                          contract.DIAGNOSTICS.qos.publisher())
+
+        def publish():
+            values = {'state': 'configuring' if self.trials else 'idle',
+                      'trials': str(self.trials), 'bag': '/data/trial_1' if self.trials else ''}
+            publisher.publish(DiagnosticArray(status=[DiagnosticStatus(
+                name=STATUS_NAME, values=[KeyValue(key=k, value=v) for k, v in values.items()])]))
+
+        def on_start(request, response):
+            self.trials += int(starts_a_trial)
+            publish()
+            self.release.wait(60)           # the answer is held until the test ends
+            response.success, response.message = False, 'too late'
+            return response
+
+        node.create_service(Trigger, contract.START_TRIAL.name, on_start, callback_group=group)
+        node.create_timer(0.2, publish, callback_group=group)
+
+
+@pytest.mark.parametrize('starts_a_trial', [True, False])
+def test_a_start_whose_answer_is_lost_is_judged_by_the_supervisors_diagnostics(
+        ros, starts_a_trial):
+    from mantis_rig.nodes.trial_client import ANSWER_GRACE_S, TrialClient
+
+    supervisor = _SilentSupervisor(ros, starts_a_trial)
+    client = ros(TrialClient(context=ros.context))
+    try:
+        assert client.wait_for_supervisor(30.0)
+        assert client.supervisor_trials == 0
+        called = time.monotonic()
+        result = client.call('start_trial', timeout_s=ANSWER_GRACE_S + 3.0)
+        waited = time.monotonic() - called
+    finally:
+        supervisor.release.set()
+    if starts_a_trial:
+        assert result == (True, 'trial started; logging to /data/trial_1')
+        assert waited >= ANSWER_GRACE_S     # the answer had its chance first
+    else:
+        assert result == (False, '/supervisor/start_trial did not answer within 5.0 s')
