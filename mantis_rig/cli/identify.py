@@ -56,6 +56,10 @@ def add_commands(commands) -> None:
                            help='refit each left-out-day fit with at most this many Jacobian '
                                 'evaluations; 0 (default): one Gauss-Newton step from the full '
                                 'fit (one simulation of the left-out strikes per day)')
+    ident_cmd.add_argument('--weight', action='append', default=[], metavar='NAME=VALUE',
+                           help='weight of a kind of residual: tip_speed, spring_energy, '
+                                'body_speed, arm_speed (relative errors), series (the recorded '
+                                'motion); defaults in mantis_sim/studies/identify.py, Weights')
     ident_cmd.set_defaults(run=run_identify)
 
     compare = commands.add_parser(
@@ -145,6 +149,7 @@ def run_identify(args) -> int:
     strikes = _load_strikes(args)
     scenes, paths = _scenes(args, strikes)
     params = [ident.parse_free_parameter(text, scenes) for text in args.fit]
+    weights = ident.Weights.parse(args.weight)
     if args.iterations < 1:
         raise InputError(f'--iterations {args.iterations}: must be >= 1')
     if args.cv_iterations < 0:
@@ -154,7 +159,7 @@ def run_identify(args) -> int:
     with ClusterMap(args.scheduler, args.workers, progress=not args.json) as mapper:
         _log(f'identify: {len(strikes)} strikes ({", ".join(sorted(scenes))}), '
              f'{len(params)} parameters, on {mapper.where} ({mapper.worker_count} worker(s))')
-        model = ident.StrikeModel(scenes, strikes, params, ident.Weights(), mapper)
+        model = ident.StrikeModel(scenes, strikes, params, weights, mapper)
         fit = ident.identify(model, max_iterations=args.iterations, log=_log)
         folds, cv_method = None, ''
         if args.cross_validate and args.cv_iterations == 0:
@@ -171,7 +176,7 @@ def run_identify(args) -> int:
     written = []
     for group, path in paths.items():
         base = yaml.safe_load(path.read_text(encoding='utf-8'))
-        doc = ident.calibrated_scene(base, fit, group, folds, sources, cv_method)
+        doc = ident.calibrated_scene(base, fit, group, folds, sources, cv_method, weights)
         target = args.out / path.name
         target.write_text(yaml.safe_dump(doc, sort_keys=False, width=100), encoding='utf-8')
         written.append(str(target))

@@ -22,7 +22,7 @@ say how the model does on strikes it has not seen.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 import datetime
 import math
 import time
@@ -57,6 +57,27 @@ class Weights:
     # where the model stands today (at 0.3 the time course, which no parameter here can match
     # closely, outweighs the lab's values thirty times over).
     series: float = 0.05
+
+    @classmethod
+    def parse(cls, items: Sequence[str]) -> Weights:
+        """Weights from 'name=value' items (the rest at their defaults)."""
+        known = {f.name for f in fields(cls)}
+        values = {}
+        for item in items:
+            name, sep, text = item.partition('=')
+            if not sep or name not in known:
+                raise IdentificationError(
+                    f'--weight {item}: expected NAME=VALUE with NAME one of '
+                    f'{", ".join(sorted(known))}')
+            try:
+                value = float(text)
+            except ValueError:
+                value = math.nan
+            if not value >= 0.0 or math.isinf(value):
+                raise IdentificationError(f'--weight {item}: the weight must be a finite '
+                                          f'number >= 0')
+            values[name] = value
+        return cls(**values)
 
 
 @dataclass(frozen=True)
@@ -387,12 +408,14 @@ def error_summary(strikes: list[RealStrike], simulated: list[SimulatedStrike]) -
 def calibrated_scene(base: dict, fit: Identification, group: str,
                      folds: Optional[list[FoldResult]] = None,
                      sources: Sequence[str] = (),
-                     cv_method: str = 'leave one recording day out') -> dict:
+                     cv_method: str = 'leave one recording day out',
+                     weights: Optional[Weights] = None) -> dict:
     """A scene file's content (``base``: the group's scene file as a mapping) with the fitted
     values that apply to the group and their provenance: which strikes, when, the residuals,
-    each parameter's standard error and the correlations."""
+    each parameter's standard error and the correlations. Where ``base`` was itself identified
+    and keeps parameters this fit held, that fit stays on record as an earlier stage."""
     doc = {k: (dict(v) if isinstance(v, dict) else v) for k, v in base.items()}
-    doc.pop('provenance', None)
+    earlier = doc.pop('provenance', None) or {}
     labels = [p.label for p in fit.parameters]
     parameters = {}
     for p, value, std, start in zip(fit.parameters, fit.values, fit.std_errors, fit.initial):
@@ -406,6 +429,7 @@ def calibrated_scene(base: dict, fit: Identification, group: str,
         else:
             entry['applies_to'] = list(p.groups or ())
         parameters[p.label] = entry
+    held, stages = _held_from_earlier_stages(earlier, parameters)
     correlation = {a: {b: float(f'{fit.correlation[i, j]:.3f}') for j, b in enumerate(labels)
                        if j != i} for i, a in enumerate(labels)}
     provenance = {
@@ -415,10 +439,11 @@ def calibrated_scene(base: dict, fit: Identification, group: str,
         'recording_days': sorted({s.recording_day for s in fit.strikes if s.recording_day}),
         'trials': [s.trial for s in fit.strikes],
         'sources': sorted(set(sources)),
-        'parameters': parameters,
+        'parameters': {**held, **parameters},
         'correlation': correlation,
         'inseparable': [f'{a} ~ {b} (correlation {rho:+.2f})'
                         for a, b, rho in fit.inseparable_pairs()],
+        'weights': asdict(weights or Weights()),
         'cost': float(f'{fit.cost:.5g}'),
         'fitted_errors': error_summary(fit.strikes, fit.simulated),
         'optimiser': fit.message,
@@ -429,8 +454,35 @@ def calibrated_scene(base: dict, fit: Identification, group: str,
         provenance['cross_validation'] = cv_method
         provenance['cross_validation_by_day'] = {
             f.left_out: error_summary(f.strikes, f.simulated) for f in folds}
+    if stages:
+        provenance['earlier_stages'] = stages
     doc['provenance'] = provenance
     return doc
+
+
+STAGE_KEYS = ('date', 'strikes', 'weights', 'cost', 'fitted_errors', 'cross_validated_errors',
+              'cross_validation', 'optimiser')
+
+
+def _held_from_earlier_stages(earlier: dict, refitted: dict) -> tuple[dict, list]:
+    """(the parameters an earlier identification fitted that this one held, each marked with
+    its stage, 1 the first; the record of those earlier fits), or ({}, []) if it held none."""
+    if earlier.get('identified_by') != 'mantis identify':
+        return {}, []
+    stages = list(earlier.get('earlier_stages') or [])
+    previous = len(stages) + 1
+    fitted_there = {label: entry for label, entry in (earlier.get('parameters') or {}).items()
+                    if 'held_from_stage' not in entry}
+    held = {label: entry if 'held_from_stage' in entry else {**entry,
+                                                               'held_from_stage': previous}
+            for label, entry in (earlier.get('parameters') or {}).items()
+            if label not in refitted}
+    if not held:
+        return {}, []
+    record = {key: earlier[key] for key in STAGE_KEYS if key in earlier}
+    record.setdefault('weights', asdict(Weights()))
+    stages.append({'stage': previous, 'parameters': sorted(fitted_there), **record})
+    return held, stages
 
 
 __all__ += ['calibrated_scene', 'error_summary']
