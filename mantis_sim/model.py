@@ -52,6 +52,14 @@ class Dynamics(NamedTuple):
     loss_power: float           # dissipated by damping, drag and tendon damping
 
 
+def kinetic_lever(scene: Scene) -> float:
+    """The pivot's braking lever while the arm slides, mm (scene.hinge)."""
+    hinge = scene.hinge
+    if hinge.kinetic_friction_lever_mm is not None:
+        return hinge.kinetic_friction_lever_mm
+    return hinge.friction_lever_mm * hinge.kinetic_friction_ratio
+
+
 class Model:
     def __init__(self, scene: Scene):
         self.scene = scene
@@ -79,7 +87,7 @@ class Model:
         self.restitution = scene.contact.restitution if scene.has('contact_restitution') else 0.0
         self.friction_lever = (scene.hinge.friction_lever_mm if scene.has('pivot_friction')
                                else 0.0)
-        self.kinetic_lever = self.friction_lever * scene.hinge.kinetic_friction_ratio
+        self.kinetic_lever = kinetic_lever(scene) if scene.has('pivot_friction') else 0.0
         self.latch_speed = scene.contact.latch_speed_rad_per_s * 1e-3
         self.contact_angle = self.mech.contact_angle
         self.kappa = scene.integration.baumgarte_per_ms

@@ -98,6 +98,13 @@ class Hinge:
     kinetic_friction_ratio: float = param(1.0, '1', 'mu_kinetic / mu_static of the arm pivot: '
                                           'the sliding pivot brakes with this share of the '
                                           'static limit (effect pivot_friction)', 0.0, 1.0)
+    # What holds the arm varies from day to day on the real robot, how hard its swing is
+    # braked does not follow it (docs/fidelity.md): a braking lever of its own keeps the
+    # braking where a study moves the hold.
+    kinetic_friction_lever_mm: Optional[float] = param(
+        None, 'mm', 'arm pivot friction while it slides: the braking torque is this lever x '
+        'the tendon force; when given, kinetic_friction_ratio is not used (default: '
+        'kinetic_friction_ratio x friction_lever_mm; effect pivot_friction)', 0.0, 5.0)
 
 
 @dataclass(frozen=True)

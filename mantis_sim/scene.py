@@ -158,6 +158,12 @@ def _check_consistency(scene: Scene) -> None:
         raise ParameterError(f'drive.start_position_mm = {scene.drive.start_position_mm} leaves '
                              f'no travel: it must be below drive.travel_mm = '
                              f'{scene.drive.travel_mm}')
+    hinge = scene.hinge
+    if (hinge.kinetic_friction_lever_mm is not None
+            and hinge.kinetic_friction_lever_mm > hinge.friction_lever_mm):
+        raise ParameterError(f'hinge.kinetic_friction_lever_mm = {hinge.kinetic_friction_lever_mm}'
+                             f' exceeds hinge.friction_lever_mm = {hinge.friction_lever_mm}: a '
+                             f'sliding pivot cannot brake more than it can hold')
     theta3 = scene.initial.theta3_deg
     if theta3 is not None and theta3 < g.contact_angle_deg:
         raise ParameterError(f'initial.theta3_deg = {theta3} is inside the body: it must be '

@@ -464,6 +464,16 @@ STAGE_KEYS = ('date', 'strikes', 'weights', 'cost', 'fitted_errors', 'cross_vali
               'cross_validation', 'optimiser')
 
 
+def _same_parameter(label: str, other: str) -> bool:
+    """Whether two labels (KEY or KEY@GROUP[+GROUP]) set one key for a group in common."""
+    key, _, groups = label.partition('@')
+    other_key, _, other_groups = other.partition('@')
+    if key != other_key:
+        return False
+    return not groups or not other_groups or bool(set(groups.split('+'))
+                                                  & set(other_groups.split('+')))
+
+
 def _held_from_earlier_stages(earlier: dict, refitted: dict) -> tuple[dict, list]:
     """(the parameters an earlier identification fitted that this one held, each marked with
     its stage, 1 the first; the record of those earlier fits), or ({}, []) if it held none."""
@@ -476,7 +486,7 @@ def _held_from_earlier_stages(earlier: dict, refitted: dict) -> tuple[dict, list
     held = {label: entry if 'held_from_stage' in entry else {**entry,
                                                                'held_from_stage': previous}
             for label, entry in (earlier.get('parameters') or {}).items()
-            if label not in refitted}
+            if not any(_same_parameter(label, other) for other in refitted)}
     if not held:
         return {}, []
     record = {key: earlier[key] for key in STAGE_KEYS if key in earlier}

@@ -312,3 +312,27 @@ def test_a_header_damaged_into_an_extra_field_is_refused_not_a_crash(tmp_path):
     path.write_bytes(bytes(content))
     with pytest.raises(StrikeDataError, match='fields where the header names|missing column'):
         read_summary_table(path)
+
+
+def test_a_refit_of_one_key_for_some_groups_supersedes_the_earlier_fit_of_that_key():
+    """The earlier stage's entry is held only where no label of this fit sets the same key for
+    a group in common: KEY@air_19mm supersedes KEY, not KEY@water_23mm or another key."""
+    first = {'stage': 1, 'parameters': ['geometry.L2_mm'], 'date': 'first'}
+    earlier = {'identified_by': 'mantis identify', 'date': 'then', 'weights': {'series': 0.05},
+               'earlier_stages': [first],
+               'parameters': {
+                   'hinge.kinetic_friction_ratio': {'value': 0.8},
+                   'hinge.friction_lever_mm@water_23mm': {'value': 0.06},
+                   'geometry.L2_mm': {'value': 1.2, 'held_from_stage': 1}}}
+    refitted = {'hinge.kinetic_friction_ratio@air_19mm': {},
+                'hinge.friction_lever_mm@air_19mm': {}}
+    held, stages = ident._held_from_earlier_stages(earlier, refitted)
+    assert set(held) == {'hinge.friction_lever_mm@water_23mm', 'geometry.L2_mm'}
+    assert held['hinge.friction_lever_mm@water_23mm']['held_from_stage'] == 2
+    assert held['geometry.L2_mm']['held_from_stage'] == 1
+    assert stages == [first, {'stage': 2, 'parameters': ['hinge.friction_lever_mm@water_23mm',
+                                                         'hinge.kinetic_friction_ratio'],
+                              'date': 'then', 'weights': {'series': 0.05}}]
+    assert ident._held_from_earlier_stages(earlier, dict.fromkeys(earlier['parameters'])) == (
+        {}, [])
+    assert ident._held_from_earlier_stages({'identified_by': 'hand'}, {}) == ({}, [])

@@ -170,6 +170,34 @@ def test_a_pivot_that_slides_more_easily_than_it_sticks_brakes_less():
     assert sliding['energy_balance_residual_mJ'] < 1e-5
 
 
+def test_a_braking_lever_of_its_own_keeps_the_braking_where_the_hold_moves():
+    """hinge.kinetic_friction_lever_mm: at ratio x lever it is the same pivot to the last digit;
+    with it held, a stronger hold stores more and strikes faster, where raising the one
+    friction (the ratio's form) brakes the faster strike away."""
+    base = [HOLD, 'hinge.friction_lever_mm=0.1', 'hinge.kinetic_friction_ratio=0.5']
+    by_ratio = sim(REF, *base).metrics
+    by_lever = sim(REF, *base, 'hinge.kinetic_friction_lever_mm=0.05').metrics
+    for key in ('peak_tip_speed_mps', 'max_spring_energy_mJ', 'phase_start_s'):
+        assert by_lever[key] == by_ratio[key]
+    held = sim(REF, HOLD, 'hinge.friction_lever_mm=0.3',
+               'hinge.kinetic_friction_lever_mm=0.05').metrics
+    both = sim(REF, HOLD, 'hinge.friction_lever_mm=0.3',
+               'hinge.kinetic_friction_ratio=0.5').metrics
+    # the same hold; only the arm's slow slide in phases II-III is braked differently
+    assert held['max_spring_energy_mJ'] == pytest.approx(both['max_spring_energy_mJ'], rel=1e-4)
+    assert held['max_spring_energy_mJ'] > by_ratio['max_spring_energy_mJ']
+    assert held['peak_tip_speed_mps'] > by_ratio['peak_tip_speed_mps'] > \
+        both['peak_tip_speed_mps']
+    assert held['energy_balance_residual_mJ'] < 1e-5
+
+
+def test_a_pivot_cannot_brake_more_than_it_holds():
+    with pytest.raises(ParameterError, match='kinetic_friction_lever_mm = 0.2 exceeds '
+                                             'hinge.friction_lever_mm = 0.1'):
+        load_scene(REF, [HOLD, 'hinge.friction_lever_mm=0.1',
+                         'hinge.kinetic_friction_lever_mm=0.2'])
+
+
 def test_the_physics_package_never_names_the_rig_package():
     """mantis_sim stands alone (issue 25): no import of, nor reference to, mantis_rig."""
     from pathlib import Path
