@@ -271,7 +271,7 @@ parameters): a compliant tendon (Kevlar, load cell and stage in series), and Cou
 the arm's pivot in proportion to the tendon force (effect `pivot_friction`), which holds the
 arm on the body past overcentering, brakes its swing and stops it where it cannot overcome it.
 What its accuracy costs in time: [accuracy_air_23mm.md](accuracy_air_23mm.md) (the scenes run
-Radau at rtol 1e-5, on the Pareto front: within 1e-6 of the converged tip speed in ~50 ms; the
+Radau at rtol 1e-5, on the Pareto front: within 1e-6 of the converged tip speed in under 0.1 s; the
 explicit solvers need 40,000+ evaluations for the stiff tendon). Identifying the whole training
 set: [identify_benchmark.md](identify_benchmark.md).
 
