@@ -193,6 +193,7 @@ def main() -> int:
                         default=REPO.parent / 'shared' / 'data' / 'real_trials')
     parser.add_argument('--workers', type=int, default=None)
     args = parser.parse_args()
+    measured = stamp()      # before the figures below change the tree
     strikes = read_strikes(args.data / 'authors_summary_train.csv',
                            args.data / 'authors_processed')
     shipped = {g: load_scene(g) for g in GROUPS}
@@ -224,7 +225,7 @@ def main() -> int:
                       if p.get('cross_validation_by_day')), {})
     not_struck = [r for r in rows_now if r['status'] != 'strike']
     text = TEMPLATE.format(
-        stamp=stamp(), strikes=len(strikes),
+        stamp=measured, strikes=len(strikes),
         parameters='\n'.join(parameter_table(shipped)),
         groups='\n'.join(group_table(rows_now, cv)),
         groups_before='\n'.join(group_table(rows_before, {})),
