@@ -306,6 +306,10 @@ def _numeric_parameters():
 
 SIM_PARAMETERS = _numeric_parameters()
 SIM_SCENES = ('air_23mm_rig', 'air_23mm', 'water_23mm')
+# Rig time simulated per example: the nominal strike comes at about 2.2 s. A drawn design
+# with no damping at all on the stiff identified tendon rings for the whole pull (7.6 s at
+# 2.33 mm/s) and Radau follows every cycle: 40-50 s of one core for one example.
+FUZZ_RIG_TIME_S = 3.0
 
 
 @st.composite
@@ -339,7 +343,8 @@ def test_random_valid_parameter_combinations_simulate_or_are_refused():
     def check(case):
         name, values = case
         try:
-            result = simulate(load_scene(name).with_values(values))
+            result = simulate(load_scene(name).with_values(
+                {**values, 'integration.t_end_s': FUZZ_RIG_TIME_S}))
         except (InputError, SimulationError):
             outcomes.append('refused')
             return
