@@ -236,7 +236,7 @@ class _TrialRun:
         print(f'bag: {self.bag}', flush=True)
         self.final = client.wait_for_end(timeout_s, alive=stack.check_processes)
         if self.final not in (None, 'done') and not stopping():
-            _name_a_dying_process(stack)
+            _name_a_dying_process(stack, lambda: client.reason)
         if self.final is None:
             client.call('abort', timeout_s=5.0)
             raise StackError(f'no end of trial within {timeout_s} s; aborted')
@@ -248,19 +248,31 @@ class _TrialRun:
 
 
 DYING_PROCESS_GRACE_S = 1.0     # how long an aborted multi-process trial watches its processes
+# ... and how long, when the abort says a node process is on its way out (it stopped its stage
+# on a signal, or a device node is shutting down): ending takes it longer than the grace on a
+# loaded machine (seen: exit 1, the process unnamed)
+SHUT_DOWN_NODE_EXIT_S = 15.0
+SHUTTING_DOWN = ('(now shuttingdown)', '(now finalized)')
 
 
-def _name_a_dying_process(stack) -> None:
+def _name_a_dying_process(stack, reason=lambda: '') -> None:
     """A trial aborted because a device node left the active state may have lost it to its
     process going down (killed by its own signal: the supervisor hears the node's transition
     before the process has exited). That is reported as the process's end, not as a device
     fault. Which it was shows only once the process has ended or not, so every aborted trial of
     a stack with node processes watches them for DYING_PROCESS_GRACE_S (an abort for another
-    reason is reported that much later); StackError names a process that ended."""
-    deadline = time.monotonic() + (DYING_PROCESS_GRACE_S if stack.processes else 0.0)
+    reason is reported that much later), or for up to SHUT_DOWN_NODE_EXIT_S while the abort's
+    ``reason()`` (the supervisor's) says a node was shutting down; StackError names a process
+    that ended."""
+    from ..nodes.stopping import PROCESS_STOPPING
+    if not stack.processes:
+        return
+    start = time.monotonic()
     while True:
         stack.check_processes()
-        if time.monotonic() >= deadline:
+        waited = time.monotonic() - start
+        shutting_down = any(mark in reason() for mark in (*SHUTTING_DOWN, PROCESS_STOPPING))
+        if waited >= (SHUT_DOWN_NODE_EXIT_S if shutting_down else DYING_PROCESS_GRACE_S):
             return
         time.sleep(0.05)
 

@@ -33,7 +33,7 @@ from mantis_rig.errors import USAGE_ERROR, ConfigurationError, InputError
 from mantis_rig.nodes.ros_env import claim_local_domain
 
 from .lean_node import LeanNode
-from .stopping import StopRequested, StopSignals, watch_parent
+from .stopping import PROCESS_STOPPING, StopRequested, StopSignals, watch_parent
 
 NODE_THREADS = 4        # a device node process: its blocking services and backend waits
 
@@ -164,7 +164,7 @@ def run_node(node_class, args=None, make_executor=None) -> int:
             spin_in_slices(executor, signals.raise_if_stopped)
     except StopRequested as stop:
         status = stop.exit_status
-        _call(node, 'emergency_stop')
+        _call(node, 'emergency_stop', f'{PROCESS_STOPPING}: {stop.reason}')
         _call(node, 'shutdown_trial', stop.reason)
     except ExternalShutdownException:
         pass

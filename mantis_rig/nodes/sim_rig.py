@@ -24,7 +24,7 @@ from mantis_rig.hardware.local_world import LocalWorldPort
 from .executors import Spinner, light_executor, run_node, spin_in_slices, threaded_executor
 from .node_table import DEVICES, STAGE_NODE, WORLD
 from .shared_clock import SharedSimClock
-from .stopping import StopRequested
+from .stopping import PROCESS_STOPPING, StopRequested
 
 DEVICE_THREADS = 8       # the device nodes' blocking services and backends waiting for the world
 
@@ -80,11 +80,11 @@ class SimRig:
         for node in self.nodes[1:]:
             devices.add_node(node)
 
-    def emergency_stop(self) -> None:
+    def emergency_stop(self, cause: str = '') -> None:
         """Stop the simulated stage now, from any thread (a signal handler)."""
         for node in self.nodes:
             if node.get_name() == STAGE_NODE:
-                node.emergency_stop()
+                node.emergency_stop(cause)
 
     def spin(self, check_stop=lambda: None) -> None:
         """Spin until the context shuts down (a process of its own): the device nodes in a
@@ -95,8 +95,9 @@ class SimRig:
         spinner = Spinner(devices, 'sim-rig-devices')
         try:
             spin_in_slices(light, check_stop)
-        except StopRequested:
-            self.emergency_stop()     # first: stopping the threads below may take seconds
+        except StopRequested as stop:
+            # first: stopping the threads below may take seconds
+            self.emergency_stop(f'{PROCESS_STOPPING}: {stop.reason}')
             raise
         finally:
             spinner.stop()

@@ -66,6 +66,7 @@ class StageNode(DeviceNode):
         self._last_state = None
         self._refused: str | None = None
         self._stopping = False          # a move ending now was stopped on purpose
+        self._stop_cause = ''           # why the process stopped the stage (emergency_stop)
         self._reported_trip: str | None = None
         self.add_post_set_parameters_callback(self._on_parameters_set)
         self._force_feed = SideNode(self, contract.FORCE_GUARD_SUFFIX)
@@ -131,9 +132,11 @@ class StageNode(DeviceNode):
         super().destroy_node()
         self._force_feed.close()
 
-    def emergency_stop(self) -> None:
+    def emergency_stop(self, cause: str = '') -> None:
         """Stop the stage now, from any thread, without waiting for a move in progress (a
-        process being interrupted)."""
+        process being interrupted: ``cause`` says so in the error the stopped move reports)."""
+        if cause:
+            self._stop_cause = cause
         stage = self.device
         if stage is not None:
             stage.stop()
@@ -259,7 +262,8 @@ class StageNode(DeviceNode):
             self._refuse(f'{what} refused: {exc}')
         except DeviceError as exc:
             if self.device is stage and self.is_active and not self._stopping:
-                self.fault(f'{what}: {exc}')
+                cause = f' ({self._stop_cause})' if self._stop_cause else ''
+                self.fault(f'{what}: {exc}{cause}')
             else:
                 self.get_logger().info(f'{what} ended: {exc}')
 

@@ -15,6 +15,9 @@ import threading
 from typing import Optional
 
 SIGNAL_NAMES = {signal.SIGINT: 'SIGINT (Ctrl-C)', signal.SIGTERM: 'SIGTERM'}
+# How a node process that stops its stage on a signal says so in the error of the move it cut
+# short: the supervisor's abort reason then shows the process is on its way out.
+PROCESS_STOPPING = 'stage stopped by its own process'
 PARENT_CHECK_S = 0.5
 
 

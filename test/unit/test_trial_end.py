@@ -1,0 +1,39 @@
+"""How `mantis trial` tells a node process on its way out from a device fault, once a trial of
+a multi-process stack has been aborted (mantis_rig.cli.trial._name_a_dying_process)."""
+import time
+
+import pytest
+
+from mantis_rig.cli import trial as cli_trial
+from mantis_rig.errors import StackError
+from mantis_rig.nodes.stopping import PROCESS_STOPPING
+
+
+class SlowlyEndingStack:
+    """A stack whose rig process ends (check_processes raises) ``ends_after_s`` from now, or
+    never."""
+
+    processes = ['sim_rig']
+
+    def __init__(self, ends_after_s=None):
+        self.ends_at = None if ends_after_s is None else time.monotonic() + ends_after_s
+
+    def check_processes(self):
+        if self.ends_at is not None and time.monotonic() >= self.ends_at:
+            raise StackError('sim_rig (exit 143) ended during the trial')
+
+
+def test_a_process_that_stopped_its_stage_on_a_signal_is_waited_for_past_the_grace():
+    reason = (f'device fault: stage_node: device error: move to 10 mm was stopped at 13 mm '
+              f'({PROCESS_STOPPING}: interrupted by SIGTERM)')
+    stack = SlowlyEndingStack(ends_after_s=2 * cli_trial.DYING_PROCESS_GRACE_S)
+    with pytest.raises(StackError, match='sim_rig'):
+        cli_trial._name_a_dying_process(stack, lambda: reason)
+
+
+def test_another_abort_is_reported_after_the_grace():
+    stack = SlowlyEndingStack()
+    started = time.monotonic()
+    cli_trial._name_a_dying_process(stack, lambda: 'force ceiling 12 N exceeded')
+    assert cli_trial.DYING_PROCESS_GRACE_S <= time.monotonic() - started \
+        < cli_trial.SHUT_DOWN_NODE_EXIT_S
