@@ -4,10 +4,11 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
+import re
 import sys
 import time
 
-from ..contract import SUPERVISOR_NODE
+from ..contract import START_TRIAL, SUPERVISOR_NODE, resolve
 from ..errors import RIG_FAULT, USAGE_ERROR
 from ..trial.conditions import (
     BACKENDS,
@@ -18,6 +19,7 @@ from ..trial.conditions import (
 )
 
 PROCESSES = ('single', 'multi')
+NAMESPACE = re.compile(r'(/[A-Za-z][A-Za-z0-9_]*)+')
 STACK_EXIT_STATUSES = (
     f"exit status: 0 done; 1 the trial did not end 'done' (aborted: the reason is in its "
     f"bag); {USAGE_ERROR} bad input (an option, a scene, a parameter); {RIG_FAULT} a rig fault: "
@@ -64,6 +66,9 @@ def _stack_arguments(parser) -> None:
                         'simulated time slips when the machine cannot keep up; 0: as fast '
                         'as the stack keeps up, the world waiting for the load cell\'s stream)')
     parser.add_argument('--seed', type=int, default=0, help='sensor noise seed (sim backend)')
+    parser.add_argument('--namespace', default='', metavar='/NS',
+                        help='the rig\'s ROS namespace, e.g. /rig2: every node, topic and '
+                        'service under it, so that two rigs share a domain (default: none)')
     parser.add_argument('--log-dir', type=Path,
                         help='with --processes multi: write each node\'s output here')
     parser.add_argument('--live', metavar='[HOST:]PORT',
@@ -118,9 +123,14 @@ def stack_config(args):
     for key, value in conditions.items():
         check_value(key, value)
     TrialConditions.from_mapping(conditions).validate()
+    if args.namespace and not NAMESPACE.fullmatch(args.namespace):
+        raise ConditionError(f'--namespace {args.namespace!r}: expected an absolute ROS '
+                             f'namespace such as /rig2 (/-separated names of letters, digits '
+                             f'and _, each starting with a letter)')
     return StackConfig(backend=args.backend, scene=args.scene, scene_overrides=scene_overrides,
                        seed=args.seed, real_time_factor=args.real_time_factor,
-                       processes=args.processes, supervisor=conditions)
+                       processes=args.processes, supervisor=conditions,
+                       namespace=args.namespace)
 
 
 def _ros_session(run, args) -> int:
@@ -166,7 +176,7 @@ def _trial(config, args, signals) -> int:
     relay = _live_relay(args)
     stack = Stack(config, log_dir=args.log_dir)
     signals.emergency_stop = stack.emergency_stop
-    client = TrialClient()
+    client = TrialClient(namespace=config.namespace)
     stack.add_node(client)
     run = _TrialRun()
     try:
@@ -204,7 +214,7 @@ def _live_relay(args):
     if not args.live:
         return None
     from ..live import LiveRelay
-    relay = LiveRelay(args.live)
+    relay = LiveRelay(args.live, namespace=args.namespace or '/')
     print(f'live view: {relay.url} (Foxglove: Open connection, Foxglove WebSocket; layout '
           f'config/foxglove/trial_layout.json)', flush=True)
     return relay
@@ -310,8 +320,9 @@ def _bringup(config, args, signals) -> int:
         if relay is not None and stack.rig is not None:
             relay.follow_clock(stack.rig.clock)
         names = ', '.join(config.node_names())
+        start = resolve(START_TRIAL.name, config.namespace)
         print(f'mantis bringup: {names} up ({config.processes} process'
-              f'{"es" if config.processes == "multi" else ""}); call /supervisor/start_trial; '
+              f'{"es" if config.processes == "multi" else ""}); call {start}; '
               f'Ctrl-C to stop', flush=True)
         while True:
             dead = stack.dead_processes()

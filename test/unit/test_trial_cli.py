@@ -1,12 +1,15 @@
-"""How `mantis trial` tells a node process on its way out from a device fault, once a trial of
-a multi-process stack has been aborted (mantis_rig.cli.trial._name_a_dying_process)."""
+"""`mantis trial` and `mantis bringup` without ROS: the options into a stack's configuration,
+and how a node process on its way out is told from a device fault once a trial of a
+multi-process stack has been aborted (mantis_rig.cli.trial._name_a_dying_process)."""
 import time
 
 import pytest
 
 from mantis_rig.cli import trial as cli_trial
+from mantis_rig.cli.main import build_parser
 from mantis_rig.errors import StackError
 from mantis_rig.nodes.stopping import PROCESS_STOPPING
+from mantis_rig.trial.conditions import ConditionError
 
 
 class SlowlyEndingStack:
@@ -37,3 +40,16 @@ def test_another_abort_is_reported_after_the_grace():
     cli_trial._name_a_dying_process(stack, lambda: 'force ceiling 12 N exceeded')
     assert cli_trial.DYING_PROCESS_GRACE_S <= time.monotonic() - started \
         < cli_trial.SHUT_DOWN_NODE_EXIT_S
+
+
+@pytest.mark.parametrize('namespace', ['/rig2', '/lab/rig_2'])
+def test_a_rig_runs_in_the_namespace_given(namespace, tmp_path):
+    args = build_parser().parse_args(['trial', '--out', str(tmp_path), '--namespace', namespace])
+    assert cli_trial.stack_config(args).namespace == namespace
+
+
+@pytest.mark.parametrize('namespace', ['rig2', '/2rig', '/rig-2', '/rig2/', '//rig'])
+def test_a_namespace_that_is_not_one_is_refused_naming_it(namespace, tmp_path):
+    args = build_parser().parse_args(['bringup', '--namespace', namespace])
+    with pytest.raises(ConditionError, match=f'--namespace {namespace!r}: expected an absolute'):
+        cli_trial.stack_config(args)
