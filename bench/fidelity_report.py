@@ -130,19 +130,6 @@ def parameter_table(scenes) -> list[str]:
     return lines
 
 
-def _within_days(y, x, days):
-    """Least-squares slope of y on x after each day's means are taken out (days with one
-    strike drop out): (slope, standard error)."""
-    keep = np.array([np.sum(days == d) > 1 for d in days])
-    y, x, days = y[keep], x[keep], days[keep]
-    for d in set(days):
-        y[days == d] -= y[days == d].mean()
-        x[days == d] -= x[days == d].mean()
-    slope = x @ y / (x @ x)
-    dof = len(y) - 1 - len(set(days))
-    return slope, float(np.sqrt(np.sum((y - slope * x) ** 2) / dof / (x @ x)))
-
-
 def hold_travel_finding(table: Path) -> str:
     """Air at 23 mm: the spring energy against the stage's travel between the lab's
     overcentering and phase IV (t_z1 - t_oc times the measured pull speed), and that travel
@@ -153,17 +140,14 @@ def hold_travel_finding(table: Path) -> str:
     travel = np.array([(float(r['t_z1_s']) - float(r['t_oc_s'])) * float(r['pull_measured_mm_s'])
                        for r in rows])
     energy = np.array([float(r['PE_max_mJ']) for r in rows])
-    pull = np.array([float(r['pull_measured_mm_s']) for r in rows])
-    days = np.array([r['recording_day'] for r in rows])
-    design = np.c_[np.ones_like(travel), travel]
-    coef, *_ = np.linalg.lstsq(design, energy, rcond=None)
-    resid = energy - design @ coef
-    se = np.sqrt(np.diag(resid @ resid / (len(rows) - 2) * np.linalg.inv(design.T @ design)))
-    per_pull, per_pull_se = _within_days(travel.copy(), pull.copy(), days)
-    return (f'{coef[1]:+.1f} +- {se[1]:.1f} mJ per mm of travel (correlation '
-            f'{np.corrcoef(travel, energy)[0, 1]:.2f}, {len(rows)} strikes; the travel spans '
-            f'{travel.min():.2f} to {travel.max():.2f} mm), while within days the travel does '
-            f'not follow the pull speed ({per_pull:+.2f} +- {per_pull_se:.2f} mm per mm/s)')
+    pull = [float(r['pull_measured_mm_s']) for r in rows]
+    per_travel = fidelity.fit_slope(travel, energy)
+    per_pull = fidelity.fit_slope(pull, travel, days=[r['recording_day'] for r in rows])
+    return (f'{per_travel.value:+.1f} +- {per_travel.std_error:.1f} mJ per mm of travel '
+            f'(correlation {np.corrcoef(travel, energy)[0, 1]:.2f}, {len(rows)} strikes; the '
+            f'travel spans {travel.min():.2f} to {travel.max():.2f} mm), while within days the '
+            f'travel does not follow the pull speed ({per_pull.value:+.2f} +- '
+            f'{per_pull.std_error:.2f} mm per mm/s)')
 
 
 def lever_sweep_finding(scene) -> str:
