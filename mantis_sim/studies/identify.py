@@ -97,11 +97,17 @@ class FreeParameter:
         return self.groups is None or group in self.groups
 
 
+def split_label(label: str) -> tuple[str, Optional[tuple]]:
+    """'section.key[@group[+group]]' (FreeParameter.label) -> (key, groups or None: all)."""
+    key, _, group_text = label.partition('@')
+    return key, tuple(g for g in group_text.split('+') if g) or None
+
+
 def parse_free_parameter(text: str, scenes: dict[str, Scene]) -> FreeParameter:
     """'section.key[@group[+group]][=LO:HI]' -> FreeParameter; bounds default to the key's
     valid range. Refuses unknown keys, groups, and bounds outside the valid range."""
     spec, _, bounds = text.partition('=')
-    key, _, group_text = spec.strip().partition('@')
+    key, groups = split_label(spec.strip())
     section, _, name = key.partition('.')
     cls = SECTIONS.get(section)
     meta = None
@@ -111,7 +117,6 @@ def parse_free_parameter(text: str, scenes: dict[str, Scene]) -> FreeParameter:
     if meta is None or meta.get('choices') is not None or meta.get('lo') is None:
         raise IdentificationError(f'--fit {text}: {key!r} is not a numeric scene parameter '
                                   f'(see `mantis scenes --params`)')
-    groups = tuple(g for g in group_text.split('+') if g) or None
     unknown = [g for g in groups or () if g not in scenes]
     if unknown:
         raise IdentificationError(f'--fit {text}: no strikes of group(s) {", ".join(unknown)} '
@@ -465,13 +470,11 @@ STAGE_KEYS = ('date', 'strikes', 'weights', 'cost', 'fitted_errors', 'cross_vali
 
 
 def _same_parameter(label: str, other: str) -> bool:
-    """Whether two labels (KEY or KEY@GROUP[+GROUP]) set one key for a group in common."""
-    key, _, groups = label.partition('@')
-    other_key, _, other_groups = other.partition('@')
+    """Whether two labels (FreeParameter.label) set one key for a group in common."""
+    (key, groups), (other_key, other_groups) = split_label(label), split_label(other)
     if key != other_key:
         return False
-    return not groups or not other_groups or bool(set(groups.split('+'))
-                                                  & set(other_groups.split('+')))
+    return groups is None or other_groups is None or bool(set(groups) & set(other_groups))
 
 
 def _held_from_earlier_stages(earlier: dict, refitted: dict) -> tuple[dict, list]:
@@ -481,17 +484,17 @@ def _held_from_earlier_stages(earlier: dict, refitted: dict) -> tuple[dict, list
         return {}, []
     stages = list(earlier.get('earlier_stages') or [])
     previous = len(stages) + 1
-    fitted_there = {label: entry for label, entry in (earlier.get('parameters') or {}).items()
-                    if 'held_from_stage' not in entry}
-    held = {label: entry if 'held_from_stage' in entry else {**entry,
-                                                               'held_from_stage': previous}
-            for label, entry in (earlier.get('parameters') or {}).items()
+    entries = earlier.get('parameters') or {}
+    held = {label: {**entry, 'held_from_stage': entry.get('held_from_stage', previous)}
+            for label, entry in entries.items()
             if not any(_same_parameter(label, other) for other in refitted)}
     if not held:
         return {}, []
     record = {key: earlier[key] for key in STAGE_KEYS if key in earlier}
     record.setdefault('weights', asdict(Weights()))
-    stages.append({'stage': previous, 'parameters': sorted(fitted_there), **record})
+    fitted_there = sorted(label for label, entry in entries.items()
+                          if 'held_from_stage' not in entry)
+    stages.append({'stage': previous, 'parameters': fitted_there, **record})
     return held, stages
 
 
