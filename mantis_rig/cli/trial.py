@@ -262,7 +262,7 @@ DYING_PROCESS_GRACE_S = 1.0     # how long an aborted multi-process trial watche
 # on a signal, or a device node is shutting down): ending takes it longer than the grace on a
 # loaded machine (seen: exit 1, the process unnamed)
 SHUT_DOWN_NODE_EXIT_S = 15.0
-SHUTTING_DOWN = ('(now shuttingdown)', '(now finalized)')
+SHUTTING_DOWN = ('shuttingdown', 'finalized')    # lifecycle states of a node going down
 
 
 def _name_a_dying_process(stack, reason=lambda: '') -> None:
@@ -275,13 +275,15 @@ def _name_a_dying_process(stack, reason=lambda: '') -> None:
     ``reason()`` (the supervisor's) says a node was shutting down; StackError names a process
     that ended."""
     from ..nodes.stopping import PROCESS_STOPPING
+    from ..nodes.supervisor_node import left_active
     if not stack.processes:
         return
+    marks = (*(left_active(state) for state in SHUTTING_DOWN), PROCESS_STOPPING)
     start = time.monotonic()
     while True:
         stack.check_processes()
         waited = time.monotonic() - start
-        shutting_down = any(mark in reason() for mark in (*SHUTTING_DOWN, PROCESS_STOPPING))
+        shutting_down = any(mark in reason() for mark in marks)
         if waited >= (SHUT_DOWN_NODE_EXIT_S if shutting_down else DYING_PROCESS_GRACE_S):
             return
         time.sleep(0.05)

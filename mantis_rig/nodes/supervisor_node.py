@@ -40,8 +40,14 @@ from .rig_client import RigClient
 
 NODE_NAME = contract.SUPERVISOR_NODE
 STATUS_NAME = f'{NODE_NAME}: trial'
+
 LOG_WRITE_FAILED = 'log write failed'     # how the abort reason of a failed log begins
 LOG_TAIL_WAIT_S = 2.0
+
+
+def left_active(state_label: str) -> str:
+    """The fault of a device node that left the active state for ``state_label``."""
+    return f'left the active state (now {state_label})'
 
 
 def _descriptor(name, spec) -> ParameterDescriptor:
@@ -286,8 +292,7 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
         if msg.start_state.id == State.PRIMARY_STATE_ACTIVE \
                 and msg.goal_state.id != State.PRIMARY_STATE_ACTIVE \
                 and self.sequence is not None:
-            self.sequence.on_device_fault(device, f'left the active state (now '
-                                                  f'{msg.goal_state.label})')
+            self.sequence.on_device_fault(device, left_active(msg.goal_state.label))
 
     def destroy_node(self):
         self.shutdown_trial()

@@ -110,17 +110,19 @@ class TrialClient(WithoutDefaultEventHandlers, Node):
     def _trial_ended_since(self, first_state: int):
         """The end of a trial heard at or after index ``first_state`` of self.states."""
         def ended() -> str | None:
-            final = next((s for s in self.states[first_state:] if s in ('done', 'aborted')),
-                         None)
+            final = self._first_heard(('done', 'aborted'), first_state)
             return None if final is None else f'the trial ended ({final})'
         return ended
+
+    def _first_heard(self, states, after: int) -> str | None:
+        return next((s for s in self.states[after:] if s in states), None)
 
     def wait_for_state(self, states, after: int = 0, timeout_s: float = 120.0) -> str | None:
         """The first state in ``states`` heard at or after index ``after`` of self.states."""
         deadline = time.monotonic() + timeout_s
         with self._changed:
             while True:
-                found = next((s for s in self.states[after:] if s in states), None)
+                found = self._first_heard(states, after)
                 remaining = deadline - time.monotonic()
                 if found is not None or remaining <= 0:
                     return found

@@ -26,9 +26,11 @@ class SlowlyEndingStack:
             raise StackError('sim_rig (exit 143) ended during the trial')
 
 
-def test_a_process_that_stopped_its_stage_on_a_signal_is_waited_for_past_the_grace():
-    reason = (f'device fault: stage_node: device error: move to 10 mm was stopped at 13 mm '
-              f'({PROCESS_STOPPING}: interrupted by SIGTERM)')
+@pytest.mark.parametrize('reason', [
+    f'device fault: stage_node: device error: move to 10 mm was stopped at 13 mm '
+    f'({PROCESS_STOPPING}: interrupted by SIGTERM)',
+    'device fault: camera_node: left the active state (now shuttingdown)'])
+def test_a_process_on_its_way_out_is_waited_for_past_the_grace(reason):
     stack = SlowlyEndingStack(ends_after_s=2 * cli_trial.DYING_PROCESS_GRACE_S)
     with pytest.raises(StackError, match='sim_rig'):
         cli_trial._name_a_dying_process(stack, lambda: reason)
