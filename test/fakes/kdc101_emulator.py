@@ -364,3 +364,16 @@ class Kdc101Emulator:
         # velocity field: counts per servo sample period (see AptScale.status_velocity_per_mm_s)
         velocity_field = max(-32768, min(32767, round(velocity_counts_s * SAMPLE_PERIOD_S)))
         return struct.pack('<HlhHL', CHANNEL, round(self._position), velocity_field, 0, bits)
+
+
+def fds_open_on(path: str) -> list[int]:
+    """File descriptors of this process open on `path` (the pty's slave device; once the
+    master is closed the link reads '<path> (deleted)')."""
+    found = []
+    for fd in os.listdir('/proc/self/fd'):
+        try:
+            if os.readlink(f'/proc/self/fd/{fd}') in (path, f'{path} (deleted)'):
+                found.append(int(fd))
+        except OSError:
+            pass
+    return found

@@ -10,7 +10,6 @@ import os
 import sys
 import threading
 
-from fakes.kdc101_emulator import Kdc101Emulator
 from fakes_nidaq import FakeDaqSystem, FakeDevice
 import numpy as np
 import pytest
@@ -36,17 +35,6 @@ def our_threads():
     return [t.name for t in threading.enumerate() if t.name.startswith(OUR_THREADS)]
 
 
-def fds_open_on(path):
-    found = []
-    for fd in os.listdir('/proc/self/fd'):
-        try:
-            if os.readlink(f'/proc/self/fd/{fd}') in (path, f'{path} (deleted)'):
-                found.append(fd)
-        except OSError:
-            pass
-    return found
-
-
 def usb_port(device, serial_number, vid=0x0403, pid=0xFAF0):
     info = ListPortInfo(device, skip_link_detection=True)
     info.vid, info.pid, info.serial_number = vid, pid, serial_number
@@ -66,20 +54,6 @@ def ports(monkeypatch):
     listed = []
     monkeypatch.setattr(serial.tools.list_ports, 'comports', lambda: list(listed))
     return listed
-
-
-@pytest.fixture
-def make_emulator():
-    emulators = []
-
-    def make(**kwargs):
-        emulators.append(Kdc101Emulator(**kwargs).start())
-        return emulators[-1]
-
-    yield make
-    for emulator in emulators:
-        assert len(fds_open_on(emulator.port)) == 1, 'a serial port was left open'
-        emulator.close()
 
 
 def quiet_cell(noise_v=0.002, offset_v=0.01, seed=1):

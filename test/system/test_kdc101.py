@@ -1,5 +1,4 @@
 """The real KDC101 stage backend against an emulated KDC101 on a pseudo-terminal."""
-import os
 import re
 import threading
 import time
@@ -11,7 +10,7 @@ from fakes.kdc101_emulator import (
     MOT_MOVE_HOME,
     MOT_MOVE_VELOCITY,
     MOT_SET_HOMEPARAMS,
-    Kdc101Emulator,
+    fds_open_on,
 )
 import numpy as np
 import pytest
@@ -44,39 +43,10 @@ def kdc101_threads():
     return [t for t in threading.enumerate() if t.name.startswith(('kdc101', 'stage-guard'))]
 
 
-def fds_open_on(path):
-    """File descriptors of this process open on `path` (the pty's slave device; once the
-    master is closed the link reads '<path> (deleted)')."""
-    found = []
-    for fd in os.listdir('/proc/self/fd'):
-        try:
-            if os.readlink(f'/proc/self/fd/{fd}') in (path, f'{path} (deleted)'):
-                found.append(int(fd))
-        except OSError:
-            pass
-    return found
-
-
 @pytest.fixture(autouse=True)
 def nothing_left_running():
     yield
     assert kdc101_threads() == [], 'a driver or emulator thread outlived the test'
-
-
-@pytest.fixture
-def make_emulator():
-    emulators = []
-
-    def make(**kwargs):
-        emulators.append(Kdc101Emulator(**kwargs).start())
-        return emulators[-1]
-
-    yield make
-    for emulator in emulators:
-        # only the emulator's own slave fd may remain: every stage closed its port
-        assert len(fds_open_on(emulator.port)) == 1, 'a serial port was left open'
-        emulator.close()
-        assert not emulator.thread_alive
 
 
 @pytest.fixture
