@@ -32,6 +32,9 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
 
 #: The project's own copies of the real trials (test/data/PROVENANCE.md says where from).
+# the KDC101 emulator's fixtures (make_emulator), for the driver's and mantis doctor's tests
+pytest_plugins = ('fakes.kdc101_fixtures',)
+
 DATA_DIR = Path(__file__).resolve().parent / 'data'
 
 

@@ -1,6 +1,8 @@
-"""Fixtures shared by the system tests of the stage's driver and of `mantis doctor`."""
-from fakes.kdc101_emulator import Kdc101Emulator, fds_open_on
+"""Fixtures shared by the tests of the stage's driver and of `mantis doctor` (a plugin of
+test/conftest.py)."""
 import pytest
+
+from fakes.kdc101_emulator import Kdc101Emulator, fds_open_on
 
 
 @pytest.fixture
