@@ -60,6 +60,11 @@ def add_commands(commands) -> None:
                            help='weight of a kind of residual: tip_speed, spring_energy, '
                                 'body_speed, arm_speed (relative errors), series (the recorded '
                                 'motion); defaults in mantis_sim/studies/identify.py, Weights')
+    ident_cmd.add_argument('--loss', default='linear', metavar='NAME[:SCALE]',
+                           help='how residuals count: linear (least squares, the default) or '
+                                'a robust loss, soft_l1, huber or cauchy, beyond SCALE (a '
+                                'relative error, e.g. cauchy:0.05): strikes far from the model, '
+                                'as a day assembled differently gives, count less')
     ident_cmd.set_defaults(run=run_identify)
 
     compare = commands.add_parser(
@@ -150,6 +155,7 @@ def run_identify(args) -> int:
     scenes, paths = _scenes(args, strikes)
     params = [ident.parse_free_parameter(text, scenes) for text in args.fit]
     weights = ident.Weights.parse(args.weight)
+    loss = ident.Loss.parse(args.loss)
     if args.iterations < 1:
         raise InputError(f'--iterations {args.iterations}: must be >= 1')
     if args.cv_iterations < 0:
@@ -160,14 +166,15 @@ def run_identify(args) -> int:
         _log(f'identify: {len(strikes)} strikes ({", ".join(sorted(scenes))}), '
              f'{len(params)} parameters, on {mapper.where} ({mapper.worker_count} worker(s))')
         model = ident.StrikeModel(scenes, strikes, params, weights, mapper)
-        fit = ident.identify(model, max_iterations=args.iterations, log=_log)
+        fit = ident.identify(model, max_iterations=args.iterations, log=_log, loss=loss)
         folds, cv_method = None, ''
         if args.cross_validate and args.cv_iterations == 0:
             folds = ident.cross_validate_one_step(model, fit, log=_log)
             cv_method = ('leave one recording day out: one Gauss-Newton step from the full fit '
                          'on the other days')
         elif args.cross_validate:
-            folds = ident.cross_validate(model, fit.values, args.cv_iterations, log=_log)
+            folds = ident.cross_validate(model, fit.values, args.cv_iterations, log=_log,
+                                         loss=loss)
             cv_method = (f'leave one recording day out: refitted on the other days '
                          f'({args.cv_iterations} iterations at most)')
     args.out.mkdir(parents=True, exist_ok=True)

@@ -8,12 +8,14 @@ group (air_19mm, air_23mm, water_23mm: a parameter may be free for all groups or
 - where the strike's motion was recorded, the body's and the arm's turn from the start of phase
   IV (theta1(t) - theta1(0), theta3(t) - theta3(0)) on a time grid through the strike, scaled so
   that a whole series weighs as much as one summary value.
-scipy's least_squares (trust region, within bounds) minimises their sum of squares; its
-Jacobian is taken by forward differences, all perturbed parameter sets simulated at once on the
-sweep's workers (a local Dask cluster on this machine's cores, or a cluster given by address).
-The standard errors and correlations come from that Jacobian at the solution (Gauss-Newton
-covariance, scaled by the residual variance); a correlation above CORRELATION_WARNING says the
-data cannot separate those two parameters.
+scipy's least_squares (trust region, within bounds) minimises their sum of squares, or of a
+robust loss of them (Loss: soft_l1, cauchy, huber, which weigh a strike far from the model
+less, as a strike of a day whose robot was assembled differently is); its Jacobian is taken by
+forward differences, all perturbed parameter sets simulated at once on the sweep's workers (a
+local Dask cluster on this machine's cores, or a cluster given by address). The standard errors
+and correlations come from that Jacobian at the solution (Gauss-Newton covariance, scaled by
+the residual variance, with the robust loss's weights at the solution); a correlation above
+CORRELATION_WARNING says the data cannot separate those two parameters.
 
 Cross-validation leaves out one recording day at a time: fitted on the other days (starting
 from the full fit), it predicts the left-out day's strikes; those errors, not the fitted ones,
@@ -78,6 +80,63 @@ class Weights:
                                           f'number >= 0')
             values[name] = value
         return cls(**values)
+
+
+@dataclass(frozen=True)
+class Loss:
+    """How residuals count: 'linear' (least squares) or one of scipy's robust losses, rho(z)
+    of z = (r / scale)^2, for which a residual beyond `scale` counts less than its square."""
+
+    name: str = 'linear'
+    scale: float = 1.0
+
+    NAMES = ('linear', 'soft_l1', 'huber', 'cauchy')
+
+    @classmethod
+    def parse(cls, text: str) -> Loss:
+        """'NAME[:SCALE]', as --loss takes it (SCALE is a relative error: 0.05 = 5 %)."""
+        name, _, scale_text = text.partition(':')
+        if name not in cls.NAMES:
+            raise IdentificationError(f'--loss {text}: NAME must be one of '
+                                      f'{", ".join(cls.NAMES)}')
+        try:
+            scale = float(scale_text) if scale_text else 1.0
+        except ValueError:
+            scale = math.nan
+        if not (scale > 0.0 and math.isfinite(scale)):
+            raise IdentificationError(f'--loss {text}: SCALE must be a finite number > 0')
+        return cls(name, scale)
+
+    @property
+    def label(self) -> str:
+        return self.name if self.name == 'linear' else f'{self.name}:{self.scale:g}'
+
+    def cost(self, residual: np.ndarray) -> float:
+        """What the fit minimises: 0.5 scale^2 sum(rho(z)) (0.5 sum(r^2) when linear)."""
+        z = (residual / self.scale) ** 2
+        if self.name == 'soft_l1':
+            rho = 2.0 * (np.sqrt(1.0 + z) - 1.0)
+        elif self.name == 'huber':
+            rho = np.where(z <= 1.0, z, 2.0 * np.sqrt(z) - 1.0)
+        elif self.name == 'cauchy':
+            rho = np.log1p(z)
+        else:
+            rho = z
+        return float(0.5 * self.scale ** 2 * np.sum(rho))
+
+    def row_weights(self, residual: np.ndarray) -> np.ndarray:
+        """sqrt(rho'(z)) per residual: the weights of the least-squares problem that has the
+        same step at this point (iteratively reweighted least squares)."""
+        z = (residual / self.scale) ** 2
+        if self.name == 'soft_l1':
+            slope = 1.0 / np.sqrt(1.0 + z)
+        elif self.name == 'huber':
+            slope = np.where(z <= 1.0, 1.0, 1.0 / np.sqrt(np.maximum(z, 1.0)))
+        elif self.name == 'cauchy':
+            slope = 1.0 / (1.0 + z)
+        else:
+            slope = np.ones_like(z)
+        return np.sqrt(slope)
 
 
 @dataclass(frozen=True)
@@ -152,6 +211,7 @@ class Identification:
     jacobian: Optional[np.ndarray] = None       # at the solution, residuals x parameters
     residual: Optional[np.ndarray] = None
     row_strike: Optional[np.ndarray] = None     # the strike of each residual
+    loss: Loss = Loss()
     started: str = field(default_factory=lambda: datetime.datetime.now(
         datetime.UTC).isoformat(timespec='seconds'))
 
@@ -255,8 +315,9 @@ class StrikeModel:
 
 def identify(model: StrikeModel, initial: Optional[Sequence[float]] = None,
              max_iterations: int = 8, relative_step: float = 0.02,
-             log: Callable[[str], None] = lambda _: None) -> Identification:
-    """Least-squares fit of model.params (module docstring)."""
+             log: Callable[[str], None] = lambda _: None,
+             loss: Loss = Loss()) -> Identification:
+    """Least-squares fit of model.params (module docstring), under ``loss``."""
     from scipy.optimize import least_squares
     params = model.params
     lower = np.array([p.lower for p in params])
@@ -277,7 +338,7 @@ def identify(model: StrikeModel, initial: Optional[Sequence[float]] = None,
         key = x.tobytes()
         if key not in cache:
             cache[key] = model.residuals([x])[0]
-            log(f'cost {0.5 * float(cache[key] @ cache[key]):.5g} at '
+            log(f'cost {loss.cost(cache[key]):.5g} at '
                 + ', '.join(f'{p.label}={v:.4g}' for p, v in zip(params, x)))
         return cache[key]
 
@@ -296,19 +357,23 @@ def identify(model: StrikeModel, initial: Optional[Sequence[float]] = None,
 
     scale = np.maximum(np.abs(x0), 0.05 * (upper - lower))
     solution = least_squares(fun, x0, jac=jac, bounds=(lower, upper), x_scale=scale,
-                             max_nfev=max_iterations, method='trf')
+                             max_nfev=max_iterations, method='trf', loss=loss.name,
+                             f_scale=loss.scale)
     x = solution.x
     # at the solution itself: the optimiser may stop on a step it accepted after its last one
     jacobian = last_jacobian.get(x.tobytes())
     if jacobian is None:
         jacobian = jac(x)
     residual = fun(x)
-    std_errors, correlation = _uncertainty(jacobian, residual, len(x))
+    weights = loss.row_weights(residual)
+    std_errors, correlation = _uncertainty(jacobian * weights[:, None], residual * weights,
+                                           len(x))
     simulated = model.simulate([x])[0]
     return Identification(list(params), x, std_errors, correlation, x0,
-                          float(0.5 * residual @ residual), residual.size, model.evaluations,
+                          float(solution.cost), residual.size, model.evaluations,
                           time.monotonic() - started, model.strikes, simulated,
-                          solution.message, jacobian, residual, model.row_strike.copy())
+                          solution.message, jacobian, residual, model.row_strike.copy(),
+                          loss=loss)
 
 
 def _uncertainty(jacobian: np.ndarray, residual: np.ndarray, n: int):
@@ -349,7 +414,8 @@ def cross_validate_one_step(model: StrikeModel, fit: Identification,
     folds = []
     for day in days:
         keep = np.array([model.strikes[i].recording_day != day for i in fit.row_strike])
-        j, r = fit.jacobian[keep], fit.residual[keep]
+        weights = fit.loss.row_weights(fit.residual[keep])
+        j, r = fit.jacobian[keep] * weights[:, None], fit.residual[keep] * weights
         step = -np.linalg.pinv(j.T @ j) @ (j.T @ r)
         values = np.clip(fit.values + step, lower, upper)
         test = [s for s in model.strikes if s.recording_day == day]
@@ -369,7 +435,8 @@ def _days(model: StrikeModel) -> list[str]:
 
 
 def cross_validate(model: StrikeModel, fitted: np.ndarray, max_iterations: int = 3,
-                   log: Callable[[str], None] = lambda _: None) -> list[FoldResult]:
+                   log: Callable[[str], None] = lambda _: None,
+                   loss: Loss = Loss()) -> list[FoldResult]:
     """Leave one recording day out at a time, refitted on the other days from the full fit."""
     days = _days(model)
     folds = []
@@ -381,7 +448,7 @@ def cross_validate(model: StrikeModel, fitted: np.ndarray, max_iterations: int =
         fixed = [(p, v) for p, v in zip(model.params, fitted) if p not in free]
         sub = StrikeModel(model.scenes, train, free, model.weights, model.mapper)
         start = [v for p, v in zip(model.params, fitted) if p in free]
-        fit = identify(sub, start, max_iterations=max_iterations)
+        fit = identify(sub, start, max_iterations=max_iterations, loss=loss)
         values = dict(zip(free, fit.values))
         values.update(dict(fixed))
         full = np.array([values[p] for p in model.params])
@@ -393,7 +460,7 @@ def cross_validate(model: StrikeModel, fitted: np.ndarray, max_iterations: int =
 
 
 __all__ = ['CORRELATION_WARNING', 'FoldResult', 'FreeParameter', 'Identification',
-           'IdentificationError', 'StrikeModel', 'Weights', 'cross_validate',
+           'IdentificationError', 'Loss', 'StrikeModel', 'Weights', 'cross_validate',
            'cross_validate_one_step', 'identify',
            'parse_free_parameter', 'scene_for_group', 'strike_residuals']
 
@@ -449,6 +516,7 @@ def calibrated_scene(base: dict, fit: Identification, group: str,
         'inseparable': [f'{a} ~ {b} (correlation {rho:+.2f})'
                         for a, b, rho in fit.inseparable_pairs()],
         'weights': asdict(weights or Weights()),
+        'loss': fit.loss.label,
         'cost': float(f'{fit.cost:.5g}'),
         'fitted_errors': error_summary(fit.strikes, fit.simulated),
         'optimiser': fit.message,
@@ -465,8 +533,8 @@ def calibrated_scene(base: dict, fit: Identification, group: str,
     return doc
 
 
-STAGE_KEYS = ('date', 'strikes', 'weights', 'cost', 'fitted_errors', 'cross_validated_errors',
-              'cross_validation', 'optimiser')
+STAGE_KEYS = ('date', 'strikes', 'weights', 'loss', 'cost', 'fitted_errors',
+              'cross_validated_errors', 'cross_validation', 'optimiser')
 
 
 def _same_parameter(label: str, other: str) -> bool:

@@ -230,7 +230,8 @@ def test_identify_writes_a_calibrated_scene_with_its_provenance(tmp_path, capsys
     code = mantis(['identify', '--strikes', str(data_file(TABLE)), '--processed',
                    str(data_file(PROCESSED)), '--group', 'water_23mm', '--out', str(out),
                    '--fit', 'arm.blade_drag_broadside=0.5:6', '--iterations', '1',
-                   '--weight', 'series=0.2', '--workers', '0', '--cross-validate', '--json'])
+                   '--weight', 'series=0.2', '--workers', '0', '--cross-validate', '--json',
+                   '--loss', 'huber:0.05'])
     assert code == 0
     report = json.loads(capsys.readouterr().out)
     assert set(report['cross_validation_by_day']) == {'011620', '011720'}
@@ -243,6 +244,7 @@ def test_identify_writes_a_calibrated_scene_with_its_provenance(tmp_path, capsys
     assert provenance['parameters']['arm.blade_drag_broadside']['std_error'] > 0
     assert 'water_23mm' in provenance['cross_validated_errors']
     assert provenance['weights']['series'] == 0.2 and provenance['weights']['tip_speed'] == 1
+    assert provenance['loss'] == 'huber:0.05'
     # the shipped scene was fitted in two stages; what this fit held stays on record as theirs
     fitted = provenance['parameters']
     assert 'held_from_stage' not in fitted['arm.blade_drag_broadside']
@@ -251,7 +253,7 @@ def test_identify_writes_a_calibrated_scene_with_its_provenance(tmp_path, capsys
     stages = provenance['earlier_stages']
     assert [s['stage'] for s in stages] == [1, 2]
     assert stages[1]['parameters'] == ['hinge.kinetic_friction_ratio']
-    assert stages[1]['weights']['series'] == 0.0
+    assert stages[1]['weights']['series'] == 0.0 and stages[1]['loss'] == 'soft_l1:0.01'
     doc = yaml.safe_load((out / 'water_23mm.yaml').read_text())
     assert doc['name'] == 'water_23mm' and doc['medium']['name'] == 'water'
 
@@ -263,6 +265,7 @@ def test_identify_writes_a_calibrated_scene_with_its_provenance(tmp_path, capsys
     (['--fit', 'geometry.L2_mm', '--iterations', '0'], 'must be >= 1'),
     (['--fit', 'geometry.L2_mm', '--weight', 'series=-1'], 'must be a finite number >= 0'),
     (['--fit', 'geometry.L2_mm', '--weight', 'speed=1'], 'expected NAME=VALUE'),
+    (['--fit', 'geometry.L2_mm', '--loss', 'l1'], 'NAME must be one of'),
 ])
 def test_identify_refuses_bad_input_before_any_work(tmp_path, capsys, extra, message):
     code = mantis(['identify', '--strikes', str(data_file(TABLE)), '--out',
