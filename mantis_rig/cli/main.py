@@ -7,7 +7,18 @@ import sys
 from mantis_sim.model import SimulationError
 
 from ..errors import RIG_FAULT, USAGE_ERROR, InputError, RigFault
-from . import analyze, doctor, identify, import_tracking, recover, replay, sim, sweep, trial
+from . import (
+    analyze,
+    day_state,
+    doctor,
+    identify,
+    import_tracking,
+    recover,
+    replay,
+    sim,
+    sweep,
+    trial,
+)
 
 EXIT_STATUSES = f"""exit status:
   0    done
@@ -34,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_commands(commands)
     doctor.add_commands(commands)
     identify.add_commands(commands)
+    day_state.add_commands(commands)
     return parser
 
 

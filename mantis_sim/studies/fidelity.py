@@ -196,41 +196,6 @@ def effect_slopes(rows: list[dict]) -> list[dict]:
     return out
 
 
-
-
-
-def day_state_gain(strikes: list[RealStrike], base: list[SimulatedStrike],
-                   perturbed: list[SimulatedStrike], step: float) -> dict[str, dict]:
-    """What a recording day's own state buys, by cross-validation within days: each strike is
-    predicted with one parameter (whose ``step`` gave ``perturbed``) set for its day from the
-    day's other strikes, by one linearised least-squares step on their tip-speed and energy
-    errors. Per group: strikes predicted, median |error| with the scenes as they are and with
-    the day's own value."""
-    def residual(real, sim):
-        return np.array([sim.peak_tip_speed_mps / real.peak_tip_speed_mps - 1.0,
-                         sim.spring_energy_mJ / real.spring_energy_mJ - 1.0])
-    r = [residual(s, b) for s, b in zip(strikes, base)]
-    jac = [(residual(s, p) - ri) / step for s, p, ri in zip(strikes, perturbed, r)]
-    out: dict[str, dict] = {}
-    for group in sorted({s.group for s in strikes}):
-        before, after = [], []
-        for i, s in enumerate(strikes):
-            others = [j for j, o in enumerate(strikes) if j != i and o.group == group
-                      and o.recording_day == s.recording_day]
-            if s.group != group or not others:
-                continue
-            num = sum(float(jac[j] @ r[j]) for j in others)
-            den = sum(float(jac[j] @ jac[j]) for j in others)
-            shift = -num / den if den > 0 else 0.0
-            before.append(np.abs(r[i]))
-            after.append(np.abs(r[i] + jac[i] * shift))
-        if before:
-            b, a = np.median(before, axis=0), np.median(after, axis=0)
-            out[group] = {'strikes': len(before), 'tip_speed': (float(b[0]), float(a[0])),
-                          'spring_energy': (float(b[1]), float(a[1]))}
-    return out
-
-
-__all__ = ['COMPARED', 'EFFECT_SLOPES', 'SimulatedStrike', 'Slope', 'day_state_gain',
+__all__ = ['COMPARED', 'EFFECT_SLOPES', 'SimulatedStrike', 'Slope',
            'effect_slopes', 'error_rows', 'fit_slope', 'group_summary', 'real_on_grid',
            'series_grid', 'simulate_strike', 'strike_overrides']

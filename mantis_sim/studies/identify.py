@@ -272,7 +272,8 @@ def strike_residuals(strike: RealStrike, sim: SimulatedStrike, weights: Weights)
     return np.asarray(out, dtype=float)
 
 
-def _simulate_task(task):
+def simulate_task(task):
+    """(scene, strike, with its series?) -> SimulatedStrike; a task for the workers."""
     scene, strike, series = task
     return simulate_strike(scene, strike, series=series)
 
@@ -297,7 +298,7 @@ class StrikeModel:
             scenes = {g: scene_for_group(s, self.params, values, g)
                       for g, s in self.scenes.items()}
             tasks.extend((scenes[s.group], s, s.series is not None) for s in self.strikes)
-        results = self.mapper(_simulate_task, tasks)
+        results = self.mapper(simulate_task, tasks)
         self.evaluations += len(value_sets)
         n = len(self.strikes)
         return [results[k * n:(k + 1) * n] for k in range(len(value_sets))]
@@ -461,7 +462,7 @@ def cross_validate(model: StrikeModel, fitted: np.ndarray, max_iterations: int =
 
 __all__ = ['CORRELATION_WARNING', 'FoldResult', 'FreeParameter', 'Identification',
            'IdentificationError', 'Loss', 'StrikeModel', 'Weights', 'cross_validate',
-           'cross_validate_one_step', 'identify',
+           'cross_validate_one_step', 'identify', 'simulate_task',
            'parse_free_parameter', 'scene_for_group', 'strike_residuals']
 
 

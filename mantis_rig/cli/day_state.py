@@ -1,0 +1,132 @@
+"""`mantis day-state`: a recording day's own value of one scene key, from that day's strikes.
+
+The identified scenes stand for the robot across days; strikes of one day share its assembly.
+This fits one key (default the pivot's hold, `hinge.friction_lever_mm`) to each day's strikes
+with the rest of the scene held, reports each day's value and, with `--cross-validate`, what
+the day's value predicts for a strike it did not see (leaving one strike out within days);
+`--out` writes today's robot as a scene per day (`<group>_<day>.yaml`).
+"""
+from __future__ import annotations
+
+import datetime
+import json
+import math
+from pathlib import Path
+
+import yaml
+
+from mantis_sim.errors import InputError
+from mantis_sim.studies import day_state as ds
+from mantis_sim.studies import identify as ident
+from mantis_sim.studies.parallel import ClusterMap
+
+from .identify import _load_strikes, _log, _scenes, _strike_arguments
+
+
+def add_commands(commands) -> None:
+    cmd = commands.add_parser(
+        'day-state', help="a recording day's own value of a scene key, from its strikes",
+        description='Fit one scene key to each recording day\'s strikes, the rest of the '
+                    'scene held: the day\'s own state (default: the pivot\'s hold). With '
+                    '--cross-validate, leave one strike out within days and report what the '
+                    'day\'s value predicts; with --out, write a scene per day.')
+    _strike_arguments(cmd)
+    cmd.add_argument('--key', default=ds.HOLD_KEY, metavar='KEY[@GROUP[+GROUP]][=LO:HI]',
+                     help=f'the scene key that differs by day (default {ds.HOLD_KEY}: the '
+                          f'braking of the swing then stays the scene\'s)')
+    cmd.add_argument('--iterations', type=int, default=5,
+                     help='most Gauss-Newton iterations per day (default 5)')
+    cmd.add_argument('--weight', action='append', default=[], metavar='NAME=VALUE',
+                     help='weight of a kind of residual, as for `mantis identify`')
+    cmd.add_argument('--cross-validate', action='store_true',
+                     help='also predict each strike from its day\'s other strikes')
+    cmd.add_argument('--out', type=Path, metavar='DIR',
+                     help='write one scene per group and day, <group>_<day>.yaml, here')
+    cmd.set_defaults(run=run_day_state)
+
+
+def run_day_state(args) -> int:
+    strikes = _load_strikes(args)
+    scenes, paths = _scenes(args, strikes)
+    param = ident.parse_free_parameter(args.key, scenes)
+    weights = ident.Weights.parse(args.weight)
+    if args.iterations < 1:
+        raise InputError(f'--iterations {args.iterations}: must be >= 1')
+    if args.out is not None and args.out.exists() and not args.out.is_dir():
+        raise InputError(f'--out {args.out}: exists and is not a folder')
+    days = {s.recording_day for s in strikes if param.applies_to(s.group)}
+    if '' in days or not days:
+        raise InputError(f'{args.strikes}: every strike needs its recording_day for a day\'s '
+                         f'state')
+    with ClusterMap(args.scheduler, args.workers, progress=not args.json) as mapper:
+        _log(f'day-state: {param.label} for {len(days)} recording day(s), {len(strikes)} '
+             f'strikes, on {mapper.where} ({mapper.worker_count} worker(s))')
+        model = ds.DayStates(scenes, strikes, param, weights, mapper)
+        states = model.fit(args.iterations, log=_log)
+        left_out = model.leave_one_out() if args.cross_validate else []
+    written = (_write_scenes(args.out, scenes, paths, param, states, strikes)
+               if args.out else [])
+    report = {'key': param.label,
+              'days': [{'group': s.group, 'day': s.day, 'value': s.value,
+                        'std_error': s.std_error, 'strikes': s.strikes, 'at_bound': s.at_bound}
+                       for s in states],
+              'scenes': written}
+    if args.cross_validate:
+        report['leave_one_strike_out'] = ds.left_out_summary(left_out)
+    print(json.dumps(report) if args.json else _text(report))
+    return 0
+
+
+def _write_scenes(out: Path, scenes, paths, param, states, strikes) -> list[str]:
+    """One scene file per (group, day): the group's file with the day's value (and, for the
+    hold, the scene's braking pinned), its day state on record in the provenance."""
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    for state in states:
+        doc = yaml.safe_load(paths[state.group].read_text(encoding='utf-8'))
+        scene = ds.day_scene(scenes[state.group], param.key, state.value)
+        for key in (param.key, 'hinge.kinetic_friction_lever_mm'):
+            section, _, name = key.partition('.')
+            value = getattr(getattr(scene, section), name)
+            if value is not None:
+                doc.setdefault(section, {})[name] = float(f'{value:.6g}')
+        name = f'{state.group}_{state.day}'
+        doc['name'] = name
+        doc['description'] = (f'{doc.get("description", "").strip()} Recording day '
+                              f'{state.day}: {param.key} fitted to that day\'s strikes '
+                              f'(mantis day-state).')
+        doc.setdefault('provenance', {})['day_state'] = {
+            'key': param.key, 'day': state.day, 'value': float(f'{state.value:.6g}'),
+            'std_error': float(f'{state.std_error:.3g}'), 'strikes': state.strikes,
+            'trials': [s.trial for s in strikes
+                       if s.group == state.group and s.recording_day == state.day],
+            'date': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds')}
+        target = out / f'{name}.yaml'
+        target.write_text(yaml.safe_dump(doc, sort_keys=False, width=100), encoding='utf-8')
+        written.append(str(target))
+    return written
+
+
+def _text(report: dict) -> str:
+    lines = [f'{report["key"]}: each recording day\'s own value',
+             'group          day        strikes        value   std. error']
+    for d in report['days']:
+        mark = '  (at a bound)' if d['at_bound'] else ''
+        lines.append(f'{d["group"]:14s} {d["day"]:10s} {d["strikes"]:7d} {d["value"]:12.5g} '
+                     f'{d["std_error"]:12.3g}{mark}')
+    if 'leave_one_strike_out' in report:
+        lines.append('leaving one strike out within days, median |error|:')
+        lines.append('group          strikes   tip speed: scene -> day\'s own   spring energy: '
+                     'scene -> day\'s own')
+        for group, e in report['leave_one_strike_out'].items():
+            lines.append(f'{group:14s} {e["strikes"]:7d}   {_pct(e["tip_speed_shared"])} -> '
+                         f'{_pct(e["tip_speed_own_day"])}            '
+                         f'{_pct(e["spring_energy_shared"])} -> '
+                         f'{_pct(e["spring_energy_own_day"])}')
+    if report['scenes']:
+        lines.append('scenes: ' + ', '.join(report['scenes']))
+    return '\n'.join(lines)
+
+
+def _pct(x: float) -> str:
+    return f'{100 * x:5.1f} %' if math.isfinite(x) else '  n/a'

@@ -1,0 +1,197 @@
+"""A recording day's own state: one scene key fitted to each day's strikes, the rest of the
+identified robot held, and what that buys, by leaving one strike out within days.
+
+Strikes of one day share the robot's assembly, and days differ by up to 5 m/s at the same
+conditions (docs/fidelity.md). The shipped scenes stand for the robot across days; a lab that
+has struck a few times today can set today's value of the key that differs by day (the pivot's
+hold, `hinge.friction_lever_mm`) from those strikes and simulate today's robot.
+
+Each day's value is fitted by Gauss-Newton on its strikes' residuals (identify.strike_residuals,
+the identification's weights), all days at once on the sweep's workers. Leaving one strike out,
+its day's value is one Gauss-Newton step from the scene's value on the day's other strikes, and
+the strike is then simulated with it: the error it has there is what a day's state predicts.
+
+When the key is the pivot's hold, the braking of the arm's swing stays the scene's (its
+kinetic lever is pinned): what varies by day holds the arm; what brakes it is the robot's.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from mantis_sim.model import kinetic_lever
+from mantis_sim.scene import Scene
+
+from .fidelity import SimulatedStrike
+from .identify import FreeParameter, Weights, simulate_task, strike_residuals
+from .strikes import RealStrike
+
+HOLD_KEY = 'hinge.friction_lever_mm'
+RELATIVE_STEP = 0.02
+
+
+@dataclass(frozen=True)
+class DayState:
+    group: str
+    day: str
+    value: float
+    std_error: float
+    strikes: int
+    at_bound: bool
+
+
+@dataclass(frozen=True)
+class LeftOut:
+    """One strike predicted with the scene as it is and with its day's value from the day's
+    other strikes."""
+    strike: RealStrike
+    value: float
+    shared: SimulatedStrike
+    own_day: SimulatedStrike
+
+
+def day_scene(scene: Scene, key: str, value: float, hold_braking: bool = True) -> Scene:
+    """The scene with the day's value of key; when it is the hold, the braking stays the
+    scene's (unless not ``hold_braking``: then it follows the hold, mu_k/mu_s fixed)."""
+    values = {key: value}
+    if hold_braking and key == HOLD_KEY and scene.has('pivot_friction'):
+        values['hinge.kinetic_friction_lever_mm'] = min(kinetic_lever(scene), value)
+    return scene.with_values(values)
+
+
+class DayStates:
+    """Fits ``param`` per (group, recording day) with the scenes otherwise held; simulations
+    go through ``mapper`` (mapper(function, tasks) -> results in order)."""
+
+    def __init__(self, scenes: dict[str, Scene], strikes: list[RealStrike],
+                 param: FreeParameter, weights: Weights, mapper: Callable,
+                 hold_braking: bool = True):
+        self.scenes, self.param, self.weights, self.mapper = scenes, param, weights, mapper
+        self.hold_braking = hold_braking
+        self.strikes = [s for s in strikes if s.recording_day and param.applies_to(s.group)
+                        and s.group in scenes]
+        section, _, name = param.key.partition('.')
+        self.start = {g: float(getattr(getattr(s, section), name)) for g, s in scenes.items()}
+
+    def _simulate(self, pairs: list[tuple[RealStrike, float]]) -> list[SimulatedStrike]:
+        tasks = [(day_scene(self.scenes[s.group], self.param.key, v, self.hold_braking), s,
+                  s.series is not None) for s, v in pairs]
+        return self.mapper(simulate_task, tasks)
+
+    def _residuals(self, pairs):
+        return [strike_residuals(s, m, self.weights) for (s, _), m in zip(pairs,
+                                                                           self._simulate(pairs))]
+
+    def _step(self, value: float) -> float:
+        p = self.param
+        h = RELATIVE_STEP * max(abs(value), 0.05 * (p.upper - p.lower))
+        return -h if value + h > p.upper else h
+
+    def _day_jacobians(self, members: dict, value: dict) -> dict:
+        """(group, day) -> (residuals, their derivative by the key) at the day's value."""
+        days = list(members)
+        steps = {d: self._step(value[d]) for d in days}
+        pairs = [(s, value[d]) for d in days for s in members[d]]
+        pairs += [(s, value[d] + steps[d]) for d in days for s in members[d]]
+        res = self._residuals(pairs)
+        n, k, out = len(pairs) // 2, 0, {}
+        for d in days:
+            count = len(members[d])
+            r = np.concatenate(res[k:k + count])
+            out[d] = (r, (np.concatenate(res[n + k:n + k + count]) - r) / steps[d])
+            k += count
+        return out
+
+    def fit(self, iterations: int = 5,
+            log: Callable[[str], None] = lambda _: None) -> list[DayState]:
+        """Each (group, day)'s own value, all days at once; stops early when no day moves by
+        more than a thousandth of the bounds."""
+        p = self.param
+        members: dict = {}
+        for s in self.strikes:
+            members.setdefault((s.group, s.recording_day), []).append(s)
+        value = {d: self.start[d[0]] for d in members}
+        best = {d: (math.inf, value[d]) for d in members}     # (cost, value) of each day
+        for iteration in range(iterations + 1):
+            jacobians = self._day_jacobians(members, value)
+            new = {}
+            for d in members:
+                r, j = jacobians[d]
+                if float(r @ r) <= best[d][0]:
+                    best[d] = (float(r @ r), value[d])
+                    new[d] = _gauss_newton(value[d], r, j, p)
+                else:                   # the step overshot: back towards the best value
+                    new[d] = 0.5 * (value[d] + best[d][1])
+            if iteration == iterations:
+                break
+            most = max(members, key=lambda d: abs(new[d] - value[d]))
+            moved = abs(new[most] - value[most])
+            value = new
+            log(f'day states: iteration {iteration + 1} of {iterations}, largest move '
+                f'{moved:.3g} ({most[0]} {most[1]})')
+            if moved < 1e-3 * (p.upper - p.lower):
+                break
+        if any(best[d][1] != value[d] for d in members):
+            value = {d: best[d][1] for d in members}
+            jacobians = self._day_jacobians(members, value)  # at the values, for their errors
+        out = []
+        for d in sorted(members):
+            r, j = jacobians[d]
+            jj = float(j @ j)
+            std = math.sqrt(float(r @ r) / max(r.size - 1, 1) / jj) if jj > 0 else math.inf
+            at_bound = min(value[d] - p.lower, p.upper - value[d]) <= 1e-3 * (p.upper - p.lower)
+            out.append(DayState(d[0], d[1], value[d], std, len(members[d]), at_bound))
+        return out
+
+    def leave_one_out(self) -> list[LeftOut]:
+        """Every strike of a day with at least two in its group, predicted with the scene's
+        value and with its day's value from the day's other strikes (one Gauss-Newton step)."""
+        pairs = [(s, self.start[s.group]) for s in self.strikes]
+        pairs += [(s, self.start[s.group] + self._step(self.start[s.group]))
+                  for s in self.strikes]
+        sims = self._simulate(pairs)
+        n = len(self.strikes)
+        r = [strike_residuals(s, m, self.weights) for s, m in zip(self.strikes, sims[:n])]
+        j = [(strike_residuals(s, m, self.weights) - ri) / self._step(self.start[s.group])
+             for s, m, ri in zip(self.strikes, sims[n:], r)]
+        chosen = []
+        for i, s in enumerate(self.strikes):
+            others = [k for k, o in enumerate(self.strikes) if k != i and o.group == s.group
+                      and o.recording_day == s.recording_day]
+            if others:
+                value = _gauss_newton(self.start[s.group], np.concatenate([r[k] for k in others]),
+                                      np.concatenate([j[k] for k in others]), self.param)
+                chosen.append((i, value))
+        predicted = self._simulate([(self.strikes[i], v) for i, v in chosen])
+        return [LeftOut(self.strikes[i], v, sims[i], m) for (i, v), m in zip(chosen, predicted)]
+
+
+def _gauss_newton(value: float, r: np.ndarray, j: np.ndarray, param: FreeParameter) -> float:
+    jj = float(j @ j)
+    if not jj > 0 or not math.isfinite(jj):
+        return value
+    return float(np.clip(value - float(j @ r) / jj, param.lower, param.upper))
+
+
+def left_out_summary(left_out: list[LeftOut]) -> dict[str, dict]:
+    """Per group: strikes predicted, and the median |error| of tip speed and spring energy with
+    the scene's value (`shared`) and with the day's own (`own_day`)."""
+    out = {}
+    for group in sorted({x.strike.group for x in left_out}):
+        rows = [x for x in left_out if x.strike.group == group]
+        entry = {'strikes': len(rows)}
+        for label, attr in (('tip_speed', 'peak_tip_speed_mps'),
+                            ('spring_energy', 'spring_energy_mJ')):
+            for which in ('shared', 'own_day'):
+                errors = [getattr(getattr(x, which), attr) / getattr(x.strike, attr) - 1.0
+                          for x in rows]
+                errors = np.abs([e for e in errors if math.isfinite(e)])
+                entry[f'{label}_{which}'] = float(np.median(errors)) if errors.size else math.nan
+        out[group] = entry
+    return out
+
+
+__all__ = ['HOLD_KEY', 'DayState', 'DayStates', 'LeftOut', 'day_scene', 'left_out_summary']

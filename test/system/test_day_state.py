@@ -1,0 +1,110 @@
+"""A recording day's own state (`mantis day-state`): it must recover the days' values of strikes
+the model made itself, say what a day's value predicts for a strike it did not see, and write
+today's robot as a scene that runs."""
+import json
+
+from conftest import data_file
+import pytest
+
+from mantis_rig.cli import main as mantis
+from mantis_sim.model import kinetic_lever
+from mantis_sim.scene import load_scene, load_scene_file
+from mantis_sim.studies import day_state as ds
+from mantis_sim.studies import fidelity
+from mantis_sim.studies import identify as ident
+from mantis_sim.studies.strikes import RealStrike
+
+TABLE = 'real_trials/authors_summary_train.csv'
+PROCESSED = 'real_trials/authors_processed'
+HOLDS_MM = {'d1': 0.03, 'd2': 0.12}
+
+
+def _serial(function, items):
+    return [function(item) for item in items]
+
+
+def _strikes_of_days(base):
+    """Strikes 'measured' on the model with each day's own hold, the braking the scene's."""
+    strikes = []
+    for day, hold in HOLDS_MM.items():
+        truth = ds.day_scene(base, ds.HOLD_KEY, hold)
+        for k, (pull, angle) in enumerate(((2.3, 3.0), (1.0, 3.5))):
+            strike = RealStrike(f'{day}_{k}', 'air', 23.0, angle, pull, day)
+            sim = fidelity.simulate_strike(truth, strike, series=False)
+            strikes.append(RealStrike(strike.trial, 'air', 23.0, angle, pull, day,
+                                      peak_tip_speed_mps=sim.peak_tip_speed_mps,
+                                      spring_energy_mJ=sim.spring_energy_mJ))
+    return strikes
+
+
+@pytest.mark.slow
+def test_each_day_s_hold_is_recovered_and_predicts_its_other_strikes():
+    base = load_scene('reference_air_23mm', [
+        'effects=[joint_damping, hinge_stiffness, fluid_drag, tendon_slack, '
+        'contact_restitution, pivot_friction]', 'hinge.friction_lever_mm=0.07',
+        'hinge.kinetic_friction_ratio=0.3'])
+    strikes = _strikes_of_days(base)
+    param = ident.parse_free_parameter('hinge.friction_lever_mm=0:0.5', {'air_23mm': base})
+    states = ds.DayStates({'air_23mm': base}, strikes, param, ident.Weights(), _serial)
+    fitted = {s.day: s for s in states.fit()}
+    for day, hold in HOLDS_MM.items():
+        assert fitted[day].value == pytest.approx(hold, abs=2e-3)
+        assert fitted[day].strikes == 2 and not fitted[day].at_bound
+    left_out = states.leave_one_out()
+    assert len(left_out) == 4
+    summary = ds.left_out_summary(left_out)['air_23mm']
+    assert summary['spring_energy_own_day'] < 0.2 * summary['spring_energy_shared']
+    assert summary['tip_speed_own_day'] < summary['tip_speed_shared']
+
+
+def test_a_day_s_hold_moves_the_hold_and_keeps_the_scene_s_braking():
+    scene = load_scene('air_23mm')
+    braking = kinetic_lever(scene)
+    day = ds.day_scene(scene, ds.HOLD_KEY, 0.15)
+    assert day.hinge.friction_lever_mm == 0.15 and kinetic_lever(day) == braking
+    # a day that holds less than the scene brakes cannot brake more than it holds
+    assert kinetic_lever(ds.day_scene(scene, ds.HOLD_KEY, 0.01)) == 0.01
+    # the braking follows the hold when asked (mu_k / mu_s fixed)
+    assert kinetic_lever(ds.day_scene(scene, ds.HOLD_KEY, 0.15, hold_braking=False)) == (
+        pytest.approx(0.15 * scene.hinge.kinetic_friction_ratio))
+    other = ds.day_scene(scene, 'geometry.L2_mm', 1.3)
+    assert other.geometry.L2_mm == 1.3 and other.hinge == scene.hinge
+
+
+@pytest.mark.slow
+def test_day_state_writes_a_scene_per_day_that_runs(tmp_path, capsys):
+    out = tmp_path / 'days'
+    code = mantis(['day-state', '--strikes', str(data_file(TABLE)), '--processed',
+                   str(data_file(PROCESSED)), '--group', 'water_23mm', '--out', str(out),
+                   '--iterations', '1', '--weight', 'series=0', '--workers', '0',
+                   '--cross-validate', '--json'])
+    assert code == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report['key'] == ds.HOLD_KEY
+    assert {d['day'] for d in report['days']} == {'011620', '011720'}
+    assert report['leave_one_strike_out']['water_23mm']['strikes'] == 6
+    day = next(d for d in report['days'] if d['day'] == '011620')
+    scene = load_scene_file(out / 'water_23mm_011620.yaml')
+    assert scene.name == 'water_23mm_011620'
+    assert scene.hinge.friction_lever_mm == pytest.approx(day['value'], rel=1e-5)
+    assert scene.hinge.kinetic_friction_lever_mm == pytest.approx(
+        kinetic_lever(load_scene('water_23mm')), rel=1e-5)
+    record = scene.provenance['day_state']
+    assert record['day'] == '011620' and record['strikes'] == 3 and len(record['trials']) == 3
+    assert scene.provenance['identified_by'] == 'mantis identify'
+    run = fidelity.simulate_strike(scene, RealStrike('today', 'water', 23.0, 3.0, 2.3),
+                                   series=False)
+    assert run.status == 'strike'
+
+
+@pytest.mark.parametrize('extra, message', [
+    (['--key', 'tendon.model'], 'not a numeric scene parameter'),
+    (['--iterations', '0'], 'must be >= 1'),
+    (['--key', 'hinge.friction_lever_mm@oil_23mm'], 'no strikes of group'),
+])
+def test_day_state_refuses_bad_input_before_any_work(tmp_path, capsys, extra, message):
+    code = mantis(['day-state', '--strikes', str(data_file(TABLE)), '--out',
+                   str(tmp_path / 'o'), '--workers', '0', *extra])
+    assert code == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / 'o').exists()
