@@ -489,7 +489,10 @@ and simulated:
   want less than no hold (above). What varies by day holds the arm; what brakes its
   swing is the robot's. The data across days do not fix the braking at 23 mm on their own:
   fitted per guide (stage 2 with a ratio per group, not shipped), mu_k/mu_s came out
-  0.90 +- 0.29 at 23 mm and 0.75 +- 0.11 at 19 mm.
+  0.90 +- 0.29 at 23 mm and 0.75 +- 0.11 at 19 mm. One braking lever for both guides, as one
+  pin would give (`hinge.kinetic_friction_lever_mm` fitted alone from stage 1, the robust
+  loss), is refused: it cannot exceed the 23 mm hold of 0.06 mm, and there the 19 mm strikes'
+  tip speed is 10.4 % off (median |error|), where they want about 0.17 mm.
 """
 
 

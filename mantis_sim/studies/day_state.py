@@ -26,7 +26,7 @@ from mantis_sim.model import kinetic_lever
 from mantis_sim.scene import Scene
 
 from .fidelity import SimulatedStrike
-from .identify import FreeParameter, Weights, simulate_task, strike_residuals
+from .identify import FreeParameter, Weights, scene_value, simulate_task, strike_residuals
 from .strikes import RealStrike
 
 HOLD_KEY = 'hinge.friction_lever_mm'
@@ -73,8 +73,7 @@ class DayStates:
         self.hold_braking = hold_braking
         self.strikes = [s for s in strikes if s.recording_day and param.applies_to(s.group)
                         and s.group in scenes]
-        section, _, name = param.key.partition('.')
-        self.start = {g: float(getattr(getattr(s, section), name)) for g, s in scenes.items()}
+        self.start = {g: scene_value(s, param.key) for g, s in scenes.items()}
 
     def _simulate(self, pairs: list[tuple[RealStrike, float]]) -> list[SimulatedStrike]:
         tasks = [(day_scene(self.scenes[s.group], self.param.key, v, self.hold_braking), s,

@@ -33,6 +33,7 @@ from typing import Optional
 import numpy as np
 
 from mantis_sim.errors import InputError
+from mantis_sim.model import kinetic_lever
 from mantis_sim.parameters import SECTIONS
 from mantis_sim.scene import Scene
 
@@ -390,8 +391,24 @@ def _uncertainty(jacobian: np.ndarray, residual: np.ndarray, n: int):
 
 def _default_value(scenes: dict[str, Scene], p: FreeParameter) -> float:
     group = next(g for g in sorted(scenes) if p.applies_to(g))
-    section, _, name = p.key.partition('.')
-    return float(getattr(getattr(scenes[group], section), name))
+    return scene_value(scenes[group], p.key)
+
+
+# Optional keys a scene may leave unset, and the value the model then uses.
+_WHEN_UNSET = {'hinge.kinetic_friction_lever_mm': kinetic_lever}
+
+
+def scene_value(scene: Scene, key: str) -> float:
+    """The value the model uses for a numeric key of the scene, also where an optional key is
+    left unset (hinge.kinetic_friction_lever_mm: the ratio x the static lever)."""
+    section, _, name = key.partition('.')
+    value = getattr(getattr(scene, section), name)
+    if value is None:
+        if key not in _WHEN_UNSET:
+            raise IdentificationError(f'{key} is unset in scene {scene.name} and has no value '
+                                      f'to start a fit from: set it in the scene')
+        value = _WHEN_UNSET[key](scene)
+    return float(value)
 
 
 @dataclass
@@ -462,7 +479,7 @@ def cross_validate(model: StrikeModel, fitted: np.ndarray, max_iterations: int =
 
 __all__ = ['CORRELATION_WARNING', 'FoldResult', 'FreeParameter', 'Identification',
            'IdentificationError', 'Loss', 'StrikeModel', 'Weights', 'cross_validate',
-           'cross_validate_one_step', 'identify', 'simulate_task',
+           'cross_validate_one_step', 'identify', 'scene_value', 'simulate_task',
            'parse_free_parameter', 'scene_for_group', 'strike_residuals']
 
 

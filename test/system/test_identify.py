@@ -339,3 +339,16 @@ def test_a_refit_of_one_key_for_some_groups_supersedes_the_earlier_fit_of_that_k
     assert ident._held_from_earlier_stages(earlier, dict.fromkeys(earlier['parameters'])) == (
         {}, [])
     assert ident._held_from_earlier_stages({'identified_by': 'hand'}, {}) == ({}, [])
+
+
+def test_a_fit_of_a_key_the_scene_leaves_unset_starts_from_what_the_model_uses():
+    """hinge.kinetic_friction_lever_mm is unset in the shipped scenes (the ratio x the static
+    lever is used): a fit of it starts there; a key with no such rule is refused by name."""
+    from mantis_sim.model import kinetic_lever
+    scene = load_scene('air_23mm')
+    assert scene.hinge.kinetic_friction_lever_mm is None
+    param = ident.parse_free_parameter('hinge.kinetic_friction_lever_mm=0:0.05',
+                                       {'air_23mm': scene})
+    assert ident._default_value({'air_23mm': scene}, param) == kinetic_lever(scene)
+    with pytest.raises(ident.IdentificationError, match='integration.t_end_s is unset'):
+        ident.scene_value(scene, 'integration.t_end_s')
