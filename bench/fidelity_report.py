@@ -109,10 +109,10 @@ def _change(summary: dict, what: str) -> str:
     return f'{apct(summary[what + "_shared"])} to {apct(summary[what + "_own_day"])}'
 
 
-def day_states(scenes, strikes, mapper, hold_braking: bool = True) -> day_state.DayStates:
+def day_states(scenes, strikes, mapper, hold_braking: bool = True) -> day_state.DayStateFit:
     """Each day's own hold, fitted to its tip speeds and energies (mantis day-state)."""
     param = ident.parse_free_parameter(f'{day_state.HOLD_KEY}=0:1', scenes)
-    return day_state.DayStates(scenes, strikes, param, DAY_STATE_WEIGHTS, mapper,
+    return day_state.DayStateFit(scenes, strikes, param, DAY_STATE_WEIGHTS, mapper,
                                hold_braking=hold_braking)
 
 

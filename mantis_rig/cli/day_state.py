@@ -12,6 +12,7 @@ import datetime
 import json
 import math
 from pathlib import Path
+import re
 
 import yaml
 
@@ -21,6 +22,8 @@ from mantis_sim.studies import identify as ident
 from mantis_sim.studies.parallel import ClusterMap
 
 from .identify import _load_strikes, _log, _scenes, _strike_arguments
+
+SAFE_DAY = re.compile(r'[A-Za-z0-9_.-]+')
 
 
 def add_commands(commands) -> None:
@@ -39,7 +42,9 @@ def add_commands(commands) -> None:
     cmd.add_argument('--weight', action='append', default=[], metavar='NAME=VALUE',
                      help='weight of a kind of residual, as for `mantis identify`')
     cmd.add_argument('--cross-validate', action='store_true',
-                     help='also predict each strike from its day\'s other strikes')
+                     help='also predict each strike from its day\'s other strikes (a '
+                          'one-step estimate of the day\'s value from the scene\'s, then '
+                          'simulated)')
     cmd.add_argument('--out', type=Path, metavar='DIR',
                      help='write one scene per group and day, <group>_<day>.yaml, here')
     cmd.set_defaults(run=run_day_state)
@@ -48,27 +53,36 @@ def add_commands(commands) -> None:
 def run_day_state(args) -> int:
     strikes = _load_strikes(args)
     scenes, paths = _scenes(args, strikes)
-    param = ident.parse_free_parameter(args.key, scenes)
+    param = ident.parse_free_parameter(args.key, scenes, option='--key')
+    for scene in scenes.values():
+        ident.scene_value(scene, param.key)             # refuses a key with nothing to start
     weights = ident.Weights.parse(args.weight)
     if args.iterations < 1:
         raise InputError(f'--iterations {args.iterations}: must be >= 1')
     if args.out is not None and args.out.exists() and not args.out.is_dir():
         raise InputError(f'--out {args.out}: exists and is not a folder')
-    days = {s.recording_day for s in strikes if param.applies_to(s.group)}
-    if '' in days or not days:
-        raise InputError(f'{args.strikes}: every strike needs its recording_day for a day\'s '
-                         f'state')
+    chosen = [s for s in strikes if param.applies_to(s.group)]
+    undated = [s.trial for s in chosen if not s.recording_day]
+    if undated or not chosen:
+        raise InputError(f'{args.strikes}: a day\'s state needs each strike\'s recording_day; '
+                         f'missing for {", ".join(undated[:5]) or "every strike"}')
+    days = sorted({s.recording_day for s in chosen})
+    unsafe = [d for d in days if not SAFE_DAY.fullmatch(d)]
+    if args.out is not None and unsafe:
+        raise InputError(f'{args.strikes}: recording_day {unsafe[0]!r} cannot name a scene '
+                         f'file (letters, digits, ".", "_" and "-" only)')
     with ClusterMap(args.scheduler, args.workers, progress=not args.json) as mapper:
-        _log(f'day-state: {param.label} for {len(days)} recording day(s), {len(strikes)} '
+        _log(f'day-state: {param.label} for {len(days)} recording day(s), {len(chosen)} '
              f'strikes, on {mapper.where} ({mapper.worker_count} worker(s))')
-        model = ds.DayStates(scenes, strikes, param, weights, mapper)
+        model = ds.DayStateFit(scenes, chosen, param, weights, mapper)
         states = model.fit(args.iterations, log=_log)
         left_out = model.leave_one_out() if args.cross_validate else []
-    written = (_write_scenes(args.out, scenes, paths, param, states, strikes)
+    written = (_write_scenes(args.out, scenes, paths, param, states, chosen)
                if args.out else [])
     report = {'key': param.label,
               'days': [{'group': s.group, 'day': s.day, 'value': s.value,
-                        'std_error': s.std_error, 'strikes': s.strikes, 'at_bound': s.at_bound}
+                        'std_error': s.std_error if math.isfinite(s.std_error) else None,
+                        'strikes': s.strikes, 'at_bound': s.at_bound}
                        for s in states],
               'scenes': written}
     if args.cross_validate:
@@ -86,22 +100,27 @@ def _write_scenes(out: Path, scenes, paths, param, states, strikes) -> list[str]
         doc = yaml.safe_load(paths[state.group].read_text(encoding='utf-8'))
         scene = ds.day_scene(scenes[state.group], param.key, state.value)
         for key in (param.key, 'hinge.kinetic_friction_lever_mm'):
-            section, _, name = key.partition('.')
-            value = getattr(getattr(scene, section), name)
+            section, _, field = key.partition('.')
+            value = getattr(getattr(scene, section), field)
             if value is not None:
-                doc.setdefault(section, {})[name] = float(f'{value:.6g}')
-        name = f'{state.group}_{state.day}'
-        doc['name'] = name
-        doc['description'] = (f'{doc.get("description", "").strip()} Recording day '
+                doc.setdefault(section, {})[field] = float(f'{value:.6g}')
+        scene_name = f'{state.group}_{state.day}'
+        doc['name'] = scene_name
+        doc['description'] = (f'{(doc.get("description") or "").strip()} Recording day '
                               f'{state.day}: {param.key} fitted to that day\'s strikes '
-                              f'(mantis day-state).')
-        doc.setdefault('provenance', {})['day_state'] = {
+                              f'(mantis day-state).').strip()
+        provenance = doc.setdefault('provenance', {})
+        for label, entry in (provenance.get('parameters') or {}).items():
+            key, groups = ident.split_label(label)
+            if key == param.key and (groups is None or state.group in groups):
+                entry['superseded_by'] = 'day_state'
+        provenance['day_state'] = {
             'key': param.key, 'day': state.day, 'value': float(f'{state.value:.6g}'),
             'std_error': float(f'{state.std_error:.3g}'), 'strikes': state.strikes,
             'trials': [s.trial for s in strikes
                        if s.group == state.group and s.recording_day == state.day],
             'date': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds')}
-        target = out / f'{name}.yaml'
+        target = out / f'{scene_name}.yaml'
         target.write_text(yaml.safe_dump(doc, sort_keys=False, width=100), encoding='utf-8')
         written.append(str(target))
     return written
@@ -112,10 +131,12 @@ def _text(report: dict) -> str:
              'group          day        strikes        value   std. error']
     for d in report['days']:
         mark = '  (at a bound)' if d['at_bound'] else ''
+        std = d['std_error'] if d['std_error'] is not None else math.inf
         lines.append(f'{d["group"]:14s} {d["day"]:10s} {d["strikes"]:7d} {d["value"]:12.5g} '
-                     f'{d["std_error"]:12.3g}{mark}')
+                     f'{std:12.3g}{mark}')
     if 'leave_one_strike_out' in report:
-        lines.append('leaving one strike out within days, median |error|:')
+        lines.append('leaving one strike out within days (a one-step estimate of the day\'s '
+                     'value from its other strikes), median |error|:')
         lines.append('group          strikes   tip speed: scene -> day\'s own   spring energy: '
                      'scene -> day\'s own')
         for group, e in report['leave_one_strike_out'].items():

@@ -60,11 +60,12 @@ def add_commands(commands) -> None:
                            help='weight of a kind of residual: tip_speed, spring_energy, '
                                 'body_speed, arm_speed (relative errors), series (the recorded '
                                 'motion); defaults in mantis_sim/studies/identify.py, Weights')
-    ident_cmd.add_argument('--loss', default='linear', metavar='NAME[:SCALE]',
+    ident_cmd.add_argument('--loss', default='linear', metavar='linear|NAME:SCALE',
                            help='how residuals count: linear (least squares, the default) or '
-                                'a robust loss, soft_l1, huber or cauchy, beyond SCALE (a '
-                                'relative error, e.g. cauchy:0.05): strikes far from the model, '
-                                'as a day assembled differently gives, count less')
+                                'a robust loss, soft_l1, huber or cauchy, whose residuals '
+                                'beyond SCALE count less than their square (SCALE in weighted-'
+                                'residual units: a relative error at weight 1, e.g. '
+                                'soft_l1:0.01)')
     ident_cmd.set_defaults(run=run_identify)
 
     compare = commands.add_parser(

@@ -62,7 +62,7 @@ def day_scene(scene: Scene, key: str, value: float, hold_braking: bool = True) -
     return scene.with_values(values)
 
 
-class DayStates:
+class DayStateFit:
     """Fits ``param`` per (group, recording day) with the scenes otherwise held; simulations
     go through ``mapper`` (mapper(function, tasks) -> results in order)."""
 
@@ -73,99 +73,101 @@ class DayStates:
         self.hold_braking = hold_braking
         self.strikes = [s for s in strikes if s.recording_day and param.applies_to(s.group)
                         and s.group in scenes]
-        self.start = {g: scene_value(s, param.key) for g, s in scenes.items()}
+        # from the scene's value, within the bounds asked for
+        self.start = {g: min(max(scene_value(s, param.key), param.lower), param.upper)
+                      for g, s in scenes.items()}
 
     def _simulate(self, pairs: list[tuple[RealStrike, float]]) -> list[SimulatedStrike]:
         tasks = [(day_scene(self.scenes[s.group], self.param.key, v, self.hold_braking), s,
                   s.series is not None) for s, v in pairs]
         return self.mapper(simulate_task, tasks)
 
-    def _residuals(self, pairs):
-        return [strike_residuals(s, m, self.weights) for (s, _), m in zip(pairs,
-                                                                           self._simulate(pairs))]
+    def _scale(self, value: float) -> float:
+        p = self.param
+        return max(abs(value), 0.05 * (p.upper - p.lower))
 
     def _step(self, value: float) -> float:
-        p = self.param
-        h = RELATIVE_STEP * max(abs(value), 0.05 * (p.upper - p.lower))
-        return -h if value + h > p.upper else h
+        h = RELATIVE_STEP * self._scale(value)
+        return -h if value + h > self.param.upper else h
 
-    def _day_jacobians(self, members: dict, value: dict) -> dict:
-        """(group, day) -> (residuals, their derivative by the key) at the day's value."""
-        days = list(members)
-        steps = {d: self._step(value[d]) for d in days}
-        pairs = [(s, value[d]) for d in days for s in members[d]]
-        pairs += [(s, value[d] + steps[d]) for d in days for s in members[d]]
-        res = self._residuals(pairs)
+    def _jacobians(self, groups: dict, value: dict) -> dict:
+        """For each set of strikes in ``groups`` (name -> strikes), at its value: (residuals,
+        their derivative by the key), both sets of simulations at once."""
+        names = list(groups)
+        steps = {d: self._step(value[d]) for d in names}
+        pairs = [(s, value[d]) for d in names for s in groups[d]]
+        pairs += [(s, value[d] + steps[d]) for d in names for s in groups[d]]
+        sims = self._simulate(pairs)
+        res = [strike_residuals(s, m, self.weights) for (s, _), m in zip(pairs, sims)]
         n, k, out = len(pairs) // 2, 0, {}
-        for d in days:
-            count = len(members[d])
+        for d in names:
+            count = len(groups[d])
             r = np.concatenate(res[k:k + count])
-            out[d] = (r, (np.concatenate(res[n + k:n + k + count]) - r) / steps[d])
+            out[d] = (r, (np.concatenate(res[n + k:n + k + count]) - r) / steps[d],
+                      sims[k:k + count])
             k += count
         return out
 
     def fit(self, iterations: int = 5,
             log: Callable[[str], None] = lambda _: None) -> list[DayState]:
-        """Each (group, day)'s own value, all days at once; stops early when no day moves by
-        more than a thousandth of the bounds."""
+        """Each (group, day)'s own value, all days at once. A step that raises a day's cost is
+        halved back towards its best value; the fit stops when no day moves by more than 1e-4
+        of its value (or of a hundredth of the bounds' width, if more)."""
         p = self.param
         members: dict = {}
         for s in self.strikes:
             members.setdefault((s.group, s.recording_day), []).append(s)
         value = {d: self.start[d[0]] for d in members}
-        best = {d: (math.inf, value[d]) for d in members}     # (cost, value) of each day
+        best: dict = {}                 # day -> (cost, value, residuals, derivative)
         for iteration in range(iterations + 1):
-            jacobians = self._day_jacobians(members, value)
-            new = {}
-            for d in members:
-                r, j = jacobians[d]
-                if float(r @ r) <= best[d][0]:
-                    best[d] = (float(r @ r), value[d])
-                    new[d] = _gauss_newton(value[d], r, j, p)
-                else:                   # the step overshot: back towards the best value
-                    new[d] = 0.5 * (value[d] + best[d][1])
+            for d, (r, j, _) in self._jacobians(members, value).items():
+                if d not in best or float(r @ r) <= best[d][0]:
+                    best[d] = (float(r @ r), value[d], r, j)
             if iteration == iterations:
                 break
-            most = max(members, key=lambda d: abs(new[d] - value[d]))
+            new = {}
+            for d in members:
+                _, at, r, j = best[d]
+                # from the best value on: its Gauss-Newton step, or back towards it if the last
+                # step from it raised the cost
+                new[d] = (_gauss_newton(at, r, j, p) if value[d] == at
+                          else 0.5 * (value[d] + at))
+            most = max(members, key=lambda d: abs(new[d] - value[d]) / self._scale(value[d]))
             moved = abs(new[most] - value[most])
-            value = new
             log(f'day states: iteration {iteration + 1} of {iterations}, largest move '
                 f'{moved:.3g} ({most[0]} {most[1]})')
-            if moved < 1e-3 * (p.upper - p.lower):
+            if moved <= 1e-4 * max(abs(value[most]), 0.01 * (p.upper - p.lower)):
                 break
-        if any(best[d][1] != value[d] for d in members):
-            value = {d: best[d][1] for d in members}
-            jacobians = self._day_jacobians(members, value)  # at the values, for their errors
+            value = new
         out = []
         for d in sorted(members):
-            r, j = jacobians[d]
+            _, at, r, j = best[d]
             jj = float(j @ j)
             std = math.sqrt(float(r @ r) / max(r.size - 1, 1) / jj) if jj > 0 else math.inf
-            at_bound = min(value[d] - p.lower, p.upper - value[d]) <= 1e-3 * (p.upper - p.lower)
-            out.append(DayState(d[0], d[1], value[d], std, len(members[d]), at_bound))
+            at_bound = min(at - p.lower, p.upper - at) <= 1e-3 * (p.upper - p.lower)
+            out.append(DayState(d[0], d[1], at, std, len(members[d]), at_bound))
         return out
 
     def leave_one_out(self) -> list[LeftOut]:
         """Every strike of a day with at least two in its group, predicted with the scene's
-        value and with its day's value from the day's other strikes (one Gauss-Newton step)."""
-        pairs = [(s, self.start[s.group]) for s in self.strikes]
-        pairs += [(s, self.start[s.group] + self._step(self.start[s.group]))
-                  for s in self.strikes]
-        sims = self._simulate(pairs)
-        n = len(self.strikes)
-        r = [strike_residuals(s, m, self.weights) for s, m in zip(self.strikes, sims[:n])]
-        j = [(strike_residuals(s, m, self.weights) - ri) / self._step(self.start[s.group])
-             for s, m, ri in zip(self.strikes, sims[n:], r)]
+        value and with its day's value from the day's other strikes: one Gauss-Newton step from
+        the scene's value (a one-step estimate, not fit's iterations), then simulated."""
+        strikes = self.strikes
+        at_start = self._jacobians({i: [s] for i, s in enumerate(strikes)},
+                                   {i: self.start[s.group] for i, s in enumerate(strikes)})
         chosen = []
-        for i, s in enumerate(self.strikes):
-            others = [k for k, o in enumerate(self.strikes) if k != i and o.group == s.group
+        for i, s in enumerate(strikes):
+            others = [k for k, o in enumerate(strikes) if k != i and o.group == s.group
                       and o.recording_day == s.recording_day]
             if others:
-                value = _gauss_newton(self.start[s.group], np.concatenate([r[k] for k in others]),
-                                      np.concatenate([j[k] for k in others]), self.param)
+                value = _gauss_newton(self.start[s.group],
+                                      np.concatenate([at_start[k][0] for k in others]),
+                                      np.concatenate([at_start[k][1] for k in others]),
+                                      self.param)
                 chosen.append((i, value))
-        predicted = self._simulate([(self.strikes[i], v) for i, v in chosen])
-        return [LeftOut(self.strikes[i], v, sims[i], m) for (i, v), m in zip(chosen, predicted)]
+        predicted = self._simulate([(strikes[i], v) for i, v in chosen])
+        return [LeftOut(strikes[i], v, at_start[i][2][0], m)
+                for (i, v), m in zip(chosen, predicted)]
 
 
 def _gauss_newton(value: float, r: np.ndarray, j: np.ndarray, param: FreeParameter) -> float:
@@ -186,11 +188,11 @@ def left_out_summary(left_out: list[LeftOut]) -> dict[str, dict]:
                             ('spring_energy', 'spring_energy_mJ')):
             for which in ('shared', 'own_day'):
                 errors = [getattr(getattr(x, which), attr) / getattr(x.strike, attr) - 1.0
-                          for x in rows]
+                          for x in rows if getattr(x.strike, attr)]
                 errors = np.abs([e for e in errors if math.isfinite(e)])
                 entry[f'{label}_{which}'] = float(np.median(errors)) if errors.size else math.nan
         out[group] = entry
     return out
 
 
-__all__ = ['HOLD_KEY', 'DayState', 'DayStates', 'LeftOut', 'day_scene', 'left_out_summary']
+__all__ = ['HOLD_KEY', 'DayState', 'DayStateFit', 'LeftOut', 'day_scene', 'left_out_summary']

@@ -86,26 +86,41 @@ class Weights:
 @dataclass(frozen=True)
 class Loss:
     """How residuals count: 'linear' (least squares) or one of scipy's robust losses, rho(z)
-    of z = (r / scale)^2, for which a residual beyond `scale` counts less than its square."""
+    of z = (r / scale)^2, for which a residual beyond `scale` counts less than its square.
+    Each residual row counts by itself, in the units of the weighted residuals: a relative error
+    times its weight (a tip speed 5 % off at weight 1 is 0.05). A strike the model cannot
+    simulate has residuals of FAILED_RESIDUAL, which a robust loss counts little more than a
+    large miss."""
 
     name: str = 'linear'
     scale: float = 1.0
 
     NAMES = ('linear', 'soft_l1', 'huber', 'cauchy')
 
+    def __post_init__(self):
+        if self.name not in self.NAMES:
+            raise IdentificationError(f'loss {self.name!r}: must be one of '
+                                      f'{", ".join(self.NAMES)}')
+
     @classmethod
     def parse(cls, text: str) -> Loss:
-        """'NAME[:SCALE]', as --loss takes it (SCALE is a relative error: 0.05 = 5 %)."""
-        name, _, scale_text = text.partition(':')
+        """'linear' or 'NAME:SCALE', as --loss takes it (SCALE in weighted-residual units)."""
+        name, sep, scale_text = text.partition(':')
         if name not in cls.NAMES:
             raise IdentificationError(f'--loss {text}: NAME must be one of '
                                       f'{", ".join(cls.NAMES)}')
+        if name == 'linear':
+            if sep:
+                raise IdentificationError(f'--loss {text}: least squares (linear) takes no '
+                                          f'SCALE')
+            return cls()
         try:
-            scale = float(scale_text) if scale_text else 1.0
+            scale = float(scale_text)
         except ValueError:
             scale = math.nan
         if not (scale > 0.0 and math.isfinite(scale)):
-            raise IdentificationError(f'--loss {text}: SCALE must be a finite number > 0')
+            raise IdentificationError(f'--loss {text}: a robust loss needs SCALE, a finite '
+                                      f'number > 0 (a relative error at weight 1: 0.05 = 5 %)')
         return cls(name, scale)
 
     @property
@@ -163,7 +178,8 @@ def split_label(label: str) -> tuple[str, Optional[tuple]]:
     return key, tuple(g for g in group_text.split('+') if g) or None
 
 
-def parse_free_parameter(text: str, scenes: dict[str, Scene]) -> FreeParameter:
+def parse_free_parameter(text: str, scenes: dict[str, Scene],
+                         option: str = '--fit') -> FreeParameter:
     """'section.key[@group[+group]][=LO:HI]' -> FreeParameter; bounds default to the key's
     valid range. Refuses unknown keys, groups, and bounds outside the valid range."""
     spec, _, bounds = text.partition('=')
@@ -175,11 +191,11 @@ def parse_free_parameter(text: str, scenes: dict[str, Scene]) -> FreeParameter:
         meta = next((f.metadata for f in cls.__dataclass_fields__.values() if f.name == name),
                     None)
     if meta is None or meta.get('choices') is not None or meta.get('lo') is None:
-        raise IdentificationError(f'--fit {text}: {key!r} is not a numeric scene parameter '
+        raise IdentificationError(f'{option} {text}: {key!r} is not a numeric scene parameter '
                                   f'(see `mantis scenes --params`)')
     unknown = [g for g in groups or () if g not in scenes]
     if unknown:
-        raise IdentificationError(f'--fit {text}: no strikes of group(s) {", ".join(unknown)} '
+        raise IdentificationError(f'{option} {text}: no strikes of group(s) {", ".join(unknown)} '
                                   f'(groups here: {", ".join(sorted(scenes))})')
     lo, hi = float(meta['lo']), float(meta['hi'])
     if bounds:
@@ -187,9 +203,9 @@ def parse_free_parameter(text: str, scenes: dict[str, Scene]) -> FreeParameter:
             lo_text, hi_text = bounds.split(':')
             lo, hi = float(lo_text), float(hi_text)
         except ValueError:
-            raise IdentificationError(f'--fit {text}: bounds must be LO:HI') from None
+            raise IdentificationError(f'{option} {text}: bounds must be LO:HI') from None
         if not (meta['lo'] <= lo < hi <= meta['hi']):
-            raise IdentificationError(f'--fit {text}: bounds {lo:g}:{hi:g} must lie within '
+            raise IdentificationError(f'{option} {text}: bounds {lo:g}:{hi:g} must lie within '
                                       f'the valid range [{meta["lo"]:g}, {meta["hi"]:g}] '
                                       f'{meta["unit"]} with LO < HI')
     return FreeParameter(key, lo, hi, groups)

@@ -45,7 +45,7 @@ def test_each_day_s_hold_is_recovered_and_predicts_its_other_strikes():
         'hinge.kinetic_friction_ratio=0.3'])
     strikes = _strikes_of_days(base)
     param = ident.parse_free_parameter('hinge.friction_lever_mm=0:0.5', {'air_23mm': base})
-    states = ds.DayStates({'air_23mm': base}, strikes, param, ident.Weights(), _serial)
+    states = ds.DayStateFit({'air_23mm': base}, strikes, param, ident.Weights(), _serial)
     fitted = {s.day: s for s in states.fit()}
     for day, hold in HOLDS_MM.items():
         assert fitted[day].value == pytest.approx(hold, abs=2e-3)
@@ -98,9 +98,10 @@ def test_day_state_writes_a_scene_per_day_that_runs(tmp_path, capsys):
 
 
 @pytest.mark.parametrize('extra, message', [
-    (['--key', 'tendon.model'], 'not a numeric scene parameter'),
+    (['--key', 'tendon.model'], "--key tendon.model: 'tendon.model' is not a numeric"),
     (['--iterations', '0'], 'must be >= 1'),
     (['--key', 'hinge.friction_lever_mm@oil_23mm'], 'no strikes of group'),
+    (['--key', 'integration.t_end_s'], 'integration.t_end_s is unset'),
 ])
 def test_day_state_refuses_bad_input_before_any_work(tmp_path, capsys, extra, message):
     code = mantis(['day-state', '--strikes', str(data_file(TABLE)), '--out',

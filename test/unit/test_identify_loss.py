@@ -9,18 +9,22 @@ from mantis_sim.studies.identify import IdentificationError, Loss
 
 
 @pytest.mark.parametrize('text, loss', [('linear', Loss()), ('cauchy:0.05', Loss('cauchy', 0.05)),
-                                        ('soft_l1', Loss('soft_l1', 1.0))])
+                                        ('soft_l1:1', Loss('soft_l1', 1.0))])
 def test_a_loss_is_read_from_name_and_scale(text, loss):
     assert Loss.parse(text) == loss
 
 
 @pytest.mark.parametrize('text, message', [('l1', 'NAME must be one of'),
-                                           ('huber:0', 'SCALE must be a finite number > 0'),
-                                           ('huber:x', 'SCALE must be a finite number > 0'),
-                                           ('cauchy:inf', 'SCALE must be a finite number > 0')])
+                                           ('huber', 'a robust loss needs SCALE'),
+                                           ('huber:0', 'a robust loss needs SCALE'),
+                                           ('huber:x', 'a robust loss needs SCALE'),
+                                           ('cauchy:inf', 'a robust loss needs SCALE'),
+                                           ('linear:0.3', 'takes no SCALE')])
 def test_a_bad_loss_is_refused_naming_it(text, message):
     with pytest.raises(IdentificationError, match=message):
         Loss.parse(text)
+    with pytest.raises(IdentificationError, match='must be one of'):
+        Loss('bogus')
 
 
 @pytest.mark.parametrize('name', Loss.NAMES)
