@@ -13,18 +13,9 @@ from .options import (
     err,
     export_options,
     given_conditions,
+    json_safe,
     positive_int,
 )
-
-
-def _json_safe(value):
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    return value
 
 
 def analysis_report(analysis, trial, path, parameters=()) -> dict:
@@ -110,7 +101,7 @@ def _analyze_one(args) -> int:
         from ..analysis.plots import plot_trial
         plot_trial(analysis, args.plot, title=Path(args.path).name)
     if args.json:
-        print(json.dumps(_json_safe(report), indent=2))
+        print(json.dumps(json_safe(report), indent=2))
     else:
         _print_text(report)
     return 0

@@ -22,6 +22,7 @@ from mantis_sim.studies import identify as ident
 from mantis_sim.studies.parallel import ClusterMap
 
 from .identify import _load_strikes, _log, _scenes, _strike_arguments
+from .options import json_safe
 
 SAFE_DAY = re.compile(r'[A-Za-z0-9_.-]+')
 
@@ -81,13 +82,13 @@ def run_day_state(args) -> int:
                if args.out else [])
     report = {'key': param.label,
               'days': [{'group': s.group, 'day': s.day, 'value': s.value,
-                        'std_error': s.std_error if math.isfinite(s.std_error) else None,
-                        'strikes': s.strikes, 'at_bound': s.at_bound}
+                        'std_error': s.std_error, 'strikes': s.strikes,
+                        'at_bound': s.at_bound}
                        for s in states],
               'scenes': written}
     if args.cross_validate:
         report['leave_one_strike_out'] = ds.left_out_summary(left_out)
-    print(json.dumps(report) if args.json else _text(report))
+    print(json.dumps(json_safe(report)) if args.json else _text(report))
     return 0
 
 
@@ -131,9 +132,8 @@ def _text(report: dict) -> str:
              'group          day        strikes        value   std. error']
     for d in report['days']:
         mark = '  (at a bound)' if d['at_bound'] else ''
-        std = d['std_error'] if d['std_error'] is not None else math.inf
         lines.append(f'{d["group"]:14s} {d["day"]:10s} {d["strikes"]:7d} {d["value"]:12.5g} '
-                     f'{std:12.3g}{mark}')
+                     f'{d["std_error"]:12.3g}{mark}')
     if 'leave_one_strike_out' in report:
         lines.append('leaving one strike out within days (a one-step estimate of the day\'s '
                      'value from its other strikes), median |error|:')

@@ -30,7 +30,7 @@ from mantis_sim.studies.strikes import (
     read_strikes,
 )
 
-from .options import add_cluster_options
+from .options import add_cluster_options, json_safe
 
 
 def add_commands(commands) -> None:
@@ -190,7 +190,7 @@ def run_identify(args) -> int:
         written.append(str(target))
     report = _identify_report(fit, folds, written)
     if args.json:
-        print(json.dumps(report))
+        print(json.dumps(json_safe(report)))
     else:
         print(_identify_text(report))
     return 0
@@ -275,7 +275,7 @@ def run_compare(args) -> int:
                              for r in rows if r['status'] != 'strike'],
               'outputs': sorted(str(p) for p in args.out.iterdir())}
     if args.json:
-        print(json.dumps(report))
+        print(json.dumps(json_safe(report)))
     else:
         print(_compare_text(report))
     return 0
@@ -286,11 +286,17 @@ def _compare_text(report: dict) -> str:
     for key, label, _ in fidelity.COMPARED:
         lines.append(f'{label}:')
         for group, e in report['groups'][key].items():
+            if not e['strikes']:
+                lines.append(f'  {group:14s} {0:7d}   n/a (none measured)')
+                continue
             lines.append(f'  {group:14s} {e["strikes"]:7d}   {100 * e["median_error"]:+6.1f} % '
                          f'({100 * e["median_abs_error"]:.1f} %)')
     lines.append('effect                                                   real (+- s.e.)    '
                  '   simulated')
     for e in report['effects']:
+        if not (math.isfinite(e['real']) and math.isfinite(e['real_std_error'])):
+            lines.append(f'{e["effect"]:56s} n/a: too few strikes of the kind to estimate it')
+            continue
         mark = 'within 2 s.e.' if e['within_two_std_errors'] else 'OUTSIDE 2 s.e.'
         lines.append(f'{e["effect"]:56s} {e["real"]:+7.3f} +- {e["real_std_error"]:.3f}  '
                      f'{e["sim"]:+7.3f} {e["unit"]}  {mark}')

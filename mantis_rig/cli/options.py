@@ -11,6 +11,17 @@ def err(command, text):
     print(f'mantis {command}: {text}', file=sys.stderr)
 
 
+def json_safe(value):
+    """``value`` with every non-finite float as None: JSON has no NaN or infinity."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    return value
+
+
 # ------------------------------------------------------------- trial conditions, by hand
 def add_condition_options(parser) -> None:
     parser.add_argument('--d-t-mm', type=float, metavar='MM',
