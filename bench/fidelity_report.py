@@ -106,7 +106,7 @@ def against_all_strikes(rows_now) -> str:
     return (f'{values}: against those the identified scenes reproduce {len(within)} of the four '
             f'within two standard errors' + (f' ({", ".join(within)})' if within else '')
             + f'; the closest is the {effects[closest]["effect"]}, '
-              f'{distance[closest]:.1f} standard errors off')
+              f'{distance[closest]:.2f} standard errors off')
 
 
 def day_state_table(one_friction, braking_held) -> list[str]:
