@@ -14,6 +14,7 @@ import argparse
 import csv
 import dataclasses
 import gzip
+import math
 from pathlib import Path
 import sys
 
@@ -109,17 +110,18 @@ def against_all_strikes(rows_now) -> str:
               f'{distance[closest]:.2f} standard errors off')
 
 
-def day_state_table(one_friction, braking_held) -> list[str]:
-    lines = ['| group | strikes | peak tip speed: across days | day\'s own hold, one friction '
-             '| day\'s own hold, braking held | spring energy: across days | day\'s own hold, '
-             'one friction | day\'s own hold, braking held |',
-             '|---|---|---|---|---|---|---|---|']
+def day_state_table(one_friction, braking_held, latched) -> list[str]:
+    lines = ['| group | strikes | peak tip speed: across days | own hold, one friction | own '
+             'hold, braking held | own latched angle | spring energy: across days | own hold, '
+             'one friction | own hold, braking held | own latched angle |',
+             '|---|---|---|---|---|---|---|---|---|---|']
     for g, e in one_friction.items():
-        h = braking_held[g]
+        h, a = braking_held[g], latched[g]
         lines.append(f'| {g} | {e["strikes"]} | {apct(e["tip_speed_shared"])} | '
                      f'{apct(e["tip_speed_own_day"])} | {apct(h["tip_speed_own_day"])} | '
-                     f'{apct(e["spring_energy_shared"])} | {apct(e["spring_energy_own_day"])} | '
-                     f'{apct(h["spring_energy_own_day"])} |')
+                     f'{apct(a["tip_speed_own_day"])} | {apct(e["spring_energy_shared"])} | '
+                     f'{apct(e["spring_energy_own_day"])} | {apct(h["spring_energy_own_day"])} | '
+                     f'{apct(a["spring_energy_own_day"])} |')
     return lines
 
 
@@ -127,21 +129,52 @@ def _change(summary: dict, what: str) -> str:
     return f'{apct(summary[what + "_shared"])} to {apct(summary[what + "_own_day"])}'
 
 
-def day_states(scenes, strikes, mapper, hold_braking: bool = True) -> day_state.DayStateFit:
-    """Each day's own hold, fitted to its tip speeds and energies (mantis day-state)."""
-    param = ident.parse_free_parameter(f'{day_state.HOLD_KEY}=0:1', scenes)
+def day_states(scenes, strikes, mapper, key_spec: str,
+               hold_braking: bool = True) -> day_state.DayStateFit:
+    """Each day's own value of a key, fitted to its tip speeds and energies (mantis
+    day-state)."""
+    param = ident.parse_free_parameter(key_spec, scenes)
     return day_state.DayStateFit(scenes, strikes, param, DAY_STATE_WEIGHTS, mapper,
-                               hold_braking=hold_braking)
+                                 hold_braking=hold_braking)
 
 
-def day_hold_table(states: list[day_state.DayState]) -> list[str]:
-    lines = ['| group | recording day | strikes | own hold (mm) | standard error |',
-             '|---|---|---|---|---|']
-    for s in states:
-        bound = ' (at its bound)' if s.at_bound else ''
-        lines.append(f'| {s.group} | {s.day} | {s.strikes} | {s.value:.3f}{bound} | '
-                     f'{s.std_error:.3f} |')
-    return lines
+def tracked_arm_at_overcentering(data: Path) -> dict[str, float]:
+    """trial -> the arm's angle (degrees, the authors' processed theta2) at the lab's
+    overcentering, for strikes whose overcentering lies within the recording."""
+    out = {}
+    with open(data / 'authors_summary_train.csv', newline='', encoding='utf-8') as f:
+        for r in csv.DictReader(f):
+            if 'recording star' not in r['notes']:
+                record = data / 'authors_processed' / f'{r["trial"]}_data.csv.gz'
+                out[r['trial']] = _angles_at(record, float(r['t_oc_s']))[1]
+    return out
+
+
+def day_states_table(latched, holds, strikes, tracked) -> tuple[list[str], str]:
+    """Each day's own latched angle and hold, beside the arm angle its tracks show at
+    overcentering; and how the fitted angle follows the tracked one across the days."""
+    hold = {(s.group, s.day): s for s in holds}
+    lines = ['| group | recording day | strikes | own latched angle (deg) | its offset from the '
+             'recorded contact angle | arm angle tracked at overcentering (deg) | own hold (mm) |',
+             '|---|---|---|---|---|---|---|']
+    pairs = []
+    for s in latched:
+        day = [k for k in strikes if (k.group, k.recording_day) == (s.group, s.day)]
+        angle = float(np.mean([k.contact_angle_deg for k in day])) + s.value
+        seen = [tracked[k.trial] for k in day if k.trial in tracked]
+        arm = float(np.mean(seen)) if seen else math.nan
+        if seen:
+            pairs.append((angle, arm))
+        h = hold[(s.group, s.day)]
+        lines.append(f'| {s.group} | {s.day} | {s.strikes} | {angle:.1f} | {s.value:+.1f} +- '
+                     f'{s.std_error:.1f}{" (at its bound)" if s.at_bound else ""} | '
+                     f'{arm:.1f} | {h.value:.3f}{" (at its bound)" if h.at_bound else ""} |')
+    fitted, seen = np.array(pairs).T
+    slope = fidelity.fit_slope(seen, fitted)
+    finding = (f'correlation {np.corrcoef(fitted, seen)[0, 1]:.2f} over {len(pairs)} day-groups, '
+               f'{slope.value:.2f} +- {slope.std_error:.2f} degrees fitted per degree tracked, '
+               f'the fitted {float(np.mean(seen - fitted)):.1f} degrees lower on average')
+    return lines, finding
 
 
 def parameter_table(scenes) -> list[str]:
@@ -311,11 +344,15 @@ def main() -> int:
     with ClusterMap(None, args.workers, progress=True) as mapper:
         now = simulate_all(shipped, strikes, mapper)
         before = simulate_all(reference, strikes, mapper)
-        one_friction = day_state.left_out_summary(
-            day_states(shipped, strikes, mapper, hold_braking=False).leave_one_out())
-        held = day_states(shipped, strikes, mapper)
+        hold_spec = f'{day_state.HOLD_KEY}=0:1'
+        one_friction = day_state.left_out_summary(day_states(
+            shipped, strikes, mapper, hold_spec, hold_braking=False).leave_one_out())
+        held = day_states(shipped, strikes, mapper, hold_spec)
         braking_held = day_state.left_out_summary(held.leave_one_out())
         own_holds = held.fit()
+        latch = day_states(shipped, strikes, mapper, day_state.DEFAULT_DAY_KEY)
+        latched = day_state.left_out_summary(latch.leave_one_out())
+        own_latched = latch.fit()
         contact = contact_angle_finding(args.data, shipped['air_23mm'], strikes, mapper)
     rows_now = fidelity.error_rows(strikes, now)
     rows_before = fidelity.error_rows(strikes, before)
@@ -330,6 +367,8 @@ def main() -> int:
     cv_by_day = next((p.get('cross_validation_by_day') for p in provenance.values()
                       if p.get('cross_validation_by_day')), {})
     not_struck = [r for r in rows_now if r['status'] != 'strike']
+    days_table, latch_follows = day_states_table(own_latched, own_holds, strikes,
+                                                 tracked_arm_at_overcentering(args.data))
     ratio = provenance['air_23mm']['parameters']['hinge.kinetic_friction_ratio']
     speed = fidelity.group_summary(rows_now, 'peak_tip_speed_mps')
     text = TEMPLATE.format(
@@ -344,8 +383,11 @@ def main() -> int:
         days='\n'.join(day_table(rows_now, cv_by_day)),
         slopes='\n'.join(slope_table(rows_now, rows_before)),
         against_all=against_all_strikes(rows_now),
-        day_state='\n'.join(day_state_table(one_friction, braking_held)),
-        day_holds='\n'.join(day_hold_table(own_holds)),
+        day_state='\n'.join(day_state_table(one_friction, braking_held, latched)),
+        day_states='\n'.join(days_table),
+        latch_follows=latch_follows,
+        latched_energy=_change(latched['air_23mm'], 'spring_energy'),
+        latched_speed=_change(latched['air_23mm'], 'tip_speed'),
         floor=' and '.join(s.day for s in own_holds if s.at_bound and s.value < 0.5),
         hold_travel=hold_travel_finding(args.data / 'authors_summary_train.csv'),
         lever_sweep=lever_sweep_finding(shipped['air_23mm']),
@@ -410,26 +452,33 @@ Reference scenes, for comparison:
 {days}
 
 ## A day's own state
-Strikes of one day share the robot's assembly. Set the pivot's static friction lever (how far
-the arm is held) for a day from that day's other strikes (one Gauss-Newton step from the
-scene's value on their tip-speed and energy errors) and simulate the strike left out with it:
-median |error| (strikes of days with at least two in the group; `mantis day-state
---cross-validate`, which also fits each day's own value and writes it as a scene). "One
-friction": the braking of the swing follows the hold (mu_k/mu_s fixed); "braking held": the day
-moves the hold only, the braking lever (`hinge.kinetic_friction_lever_mm`) stays at the
-scene's (what `mantis day-state` does):
+Strikes of one day share the robot's assembly. Set one key for a day from that day's other
+strikes (one Gauss-Newton step from the scene's value on their tip-speed and energy errors) and
+simulate the strike left out with it: median |error| (strikes of days with at least two in the
+group; `mantis day-state --cross-validate`, which also fits each day's own value and writes it
+as a scene). The keys: the pivot's static friction lever (how far the arm is held), with the
+braking of the swing following it (mu_k/mu_s fixed, "one friction") or held at the scene's
+("braking held"); and where the arm sits on the latch (`geometry.latch_offset_deg`, "latched
+angle", the default of `mantis day-state`):
 
 {day_state}
 
-Each day's own hold, fitted to all its strikes (braking held; `mantis day-state --weight
-body_speed=0 --weight arm_speed=0 --weight series=0`, which writes each as a scene):
+Each day's own latched angle and hold, each fitted to all its strikes (`mantis day-state
+--weight body_speed=0 --weight arm_speed=0 --weight series=0`, with `--key
+hinge.friction_lever_mm=0:1` for the hold, braking held; it writes each day as a scene), beside
+the arm angle the day's tracks show at the lab's overcentering (the authors' processed theta2,
+which the fit does not see):
 
-{day_holds}
+{day_states}
 
-A day at its bound of zero stores less than the model can at all: with no hold the model's arm
-leaves at overcentering, and on {floor} the real one left earlier (the paper's phase II, before
-overcentering, which lasts about 0.8 s on the robot). That, not the hold, is what a day's state
-cannot reach here.
+**What differs by day is where the arm sits on the latch.** Fitted to a day's tip speeds and
+energies alone, the latched angle follows the arm angle tracked at overcentering:
+{latch_follows}. A day's own latched angle predicts its left-out strikes far better than a
+day's own hold (air at 23 mm: energy {latched_energy}, tip speed {latched_speed}). A day's
+hold cannot reach the days that store least: with no hold the model's arm leaves at
+overcentering, and on {floor} the real arm sits further out on the latch, so it overcentres
+earlier. The recorded contact angle does not carry this (below): the shipped scenes, judged
+at the recorded angle, keep `geometry.latch_offset_deg` at 0.
 
 ## The effects a design study varies
 Least squares over the strikes (air 23 mm effects within recording days), the same fit to the
@@ -492,10 +541,11 @@ and simulated:
   0.3); the series enter the fit with a low weight (`mantis_sim/studies/identify.py`, Weights).
 - **Day-to-day spread.** Days differ by up to 5 m/s at the same conditions (the arm's latched
   angle as tracked varies by day); the shipped scenes stand for the robot across days, so a
-  day's own error stays large where its state is far from the middle. What differs by day is
-  how far the stage pulls while the arm is held past overcentering: in air at 23 mm the spring
-  energy rises {hold_travel}. A hold that ends at a force-independent, rate-independent point
-  is what Coulomb friction at the pivot gives; a day's friction is the day's state (above).
+  day's own error stays large where its state is far from the middle. In air at 23 mm the
+  spring energy rises with how far the stage pulls between overcentering and phase IV:
+  {hold_travel}. A hold that ends at a force-independent, rate-independent point is what
+  Coulomb friction at the pivot gives, but a day's own hold explains the days less well than
+  where its arm sits on the latch (above).
 - **The hold and the braking are not one friction.** Real days that store more strike faster
   (the tip speed goes about as the square root of the energy across the 23 mm days). In the
   model a day's larger friction lever holds longer and stores more but also brakes the swing
@@ -503,8 +553,7 @@ and simulated:
   with one friction improves that day's energy ({day_energy} at 23 mm, above) and worsens its
   tip speed ({day_speed}); moving the hold alone, the braking held, improves both (energy
   {held_energy}, tip speed {held_speed}), the energy little, since the days that store least
-  want less than no hold (above). What varies by day holds the arm; what brakes its
-  swing is the robot's. The data across days do not fix the braking at 23 mm on their own:
+  want less than no hold (above). The data across days do not fix the braking at 23 mm on their own:
   fitted per guide (stage 2 with a ratio per group, not shipped), mu_k/mu_s came out
   0.90 +- 0.29 at 23 mm and 0.75 +- 0.11 at 19 mm. One braking lever for both guides, as one
   pin would give (`hinge.kinetic_friction_lever_mm` fitted alone from stage 1, the robust

@@ -60,7 +60,7 @@ class Mechanism:
         self.L1, self.L2, self.L3, self.L5 = g.L1_mm, g.L2_mm, g.L3_mm, g.L5_mm
         self.d_t = g.d_t_mm
         self.beta = math.radians(g.beta_deg)
-        self.contact_angle = math.radians(g.contact_angle_deg)
+        self.contact_angle = math.radians(g.latched_angle_deg)
         self.m1, self.m2 = body.mass_g, arm.mass_g
         self.x1, self.y1 = body.com_x_mm, body.com_y_mm
         self.x2, self.y2 = arm.com_x_mm, arm.com_y_mm

@@ -37,6 +37,17 @@ class Geometry:
                             -180.0, 180.0)
     contact_angle_deg: float = param(3.0, 'deg', 'arm-body contact (latch) angle phi_c',
                                      0.0, 15.0)
+    # Where the arm actually sits on the latch differs by the day's assembly: in the tracks it
+    # is 0 to 11 degrees off the body, which the recorded contact angle does not say, and the
+    # days that store least have it furthest out (docs/fidelity.md, a day's own state).
+    latch_offset_deg: float = param(0.0, 'deg', "the arm's latched angle minus the contact "
+                                    'angle: where it sits on the latch on a given day (a day\'s '
+                                    'state, mantis day-state)', -15.0, 15.0)
+
+    @property
+    def latched_angle_deg(self) -> float:
+        """The arm's angle relative to the body while latched: contact angle + offset."""
+        return self.contact_angle_deg + self.latch_offset_deg
 
 
 @dataclass(frozen=True)

@@ -164,10 +164,15 @@ def _check_consistency(scene: Scene) -> None:
         raise ParameterError(f'hinge.kinetic_friction_lever_mm = {hinge.kinetic_friction_lever_mm}'
                              f' exceeds hinge.friction_lever_mm = {hinge.friction_lever_mm}: a '
                              f'sliding pivot cannot brake more than it can hold')
+    if not 0.0 <= g.latched_angle_deg <= 15.0:
+        raise ParameterError(f'geometry.contact_angle_deg = {g.contact_angle_deg} with '
+                             f'geometry.latch_offset_deg = {g.latch_offset_deg} puts the latched '
+                             f'arm at {g.latched_angle_deg:g} degrees: it must lie in [0, 15]')
     theta3 = scene.initial.theta3_deg
-    if theta3 is not None and theta3 < g.contact_angle_deg:
+    if theta3 is not None and theta3 < g.latched_angle_deg:
         raise ParameterError(f'initial.theta3_deg = {theta3} is inside the body: it must be '
-                             f'>= geometry.contact_angle_deg = {g.contact_angle_deg}')
+                             f'>= geometry.contact_angle_deg + latch_offset_deg = '
+                             f'{g.latched_angle_deg:g}')
 
 
 #: What a scene file must state; every other section has a documented default.

@@ -1,9 +1,10 @@
 """`mantis day-state`: a recording day's own value of one scene key, from that day's strikes.
 
 The identified scenes stand for the robot across days; strikes of one day share its assembly.
-This fits one key (default the pivot's hold, `hinge.friction_lever_mm`) to each day's strikes
-with the rest of the scene held, reports each day's value and, with `--cross-validate`, what
-the day's value predicts for a strike it did not see (leaving one strike out within days);
+This fits one key (default where the arm sits on the latch, `geometry.latch_offset_deg`) to
+each day's strikes with the rest of the scene held, reports each day's value and, with
+`--cross-validate`, what the day's value predicts for a strike it did not see (leaving one
+strike out within days);
 `--out` writes today's robot as a scene per day (`<group>_<day>.yaml`).
 """
 from __future__ import annotations
@@ -31,13 +32,15 @@ def add_commands(commands) -> None:
     cmd = commands.add_parser(
         'day-state', help="a recording day's own value of a scene key, from its strikes",
         description='Fit one scene key to each recording day\'s strikes, the rest of the '
-                    'scene held: the day\'s own state (default: the pivot\'s hold). With '
+                    'scene held: the day\'s own state (default: where the arm sits on the '
+                    'latch). With '
                     '--cross-validate, leave one strike out within days and report what the '
                     'day\'s value predicts; with --out, write a scene per day.')
     _strike_arguments(cmd)
-    cmd.add_argument('--key', default=ds.HOLD_KEY, metavar='KEY[@GROUP[+GROUP]][=LO:HI]',
-                     help=f'the scene key that differs by day (default {ds.HOLD_KEY}: the '
-                          f'braking of the swing then stays the scene\'s)')
+    cmd.add_argument('--key', default=ds.DEFAULT_DAY_KEY, metavar='KEY[@GROUP[+GROUP]][=LO:HI]',
+                     help=f'the scene key that differs by day (default {ds.DEFAULT_DAY_KEY}: '
+                          f'where the arm sits on the latch; {ds.HOLD_KEY}, the pivot\'s hold, '
+                          f'keeps the braking of the swing at the scene\'s)')
     cmd.add_argument('--iterations', type=int, default=5,
                      help='most Gauss-Newton iterations per day (default 5)')
     cmd.add_argument('--weight', action='append', default=[], metavar='NAME=VALUE',

@@ -3,8 +3,11 @@ identified robot held, and what that buys, by leaving one strike out within days
 
 Strikes of one day share the robot's assembly, and days differ by up to 5 m/s at the same
 conditions (docs/fidelity.md). The shipped scenes stand for the robot across days; a lab that
-has struck a few times today can set today's value of the key that differs by day (the pivot's
-hold, `hinge.friction_lever_mm`) from those strikes and simulate today's robot.
+has struck a few times today can set today's value of the key that differs by day from those
+strikes and simulate today's robot. By default that is where the arm sits on the latch
+(`geometry.latch_offset_deg`): fitted to a day's peaks alone, it follows the arm angle the
+tracks show at overcentering. The pivot's hold (`hinge.friction_lever_mm`) is the other
+candidate, and does worse (docs/fidelity.md).
 
 Each day's value is fitted by Gauss-Newton on its strikes' residuals (identify.strike_residuals,
 the identification's weights), all days at once on the sweep's workers. Leaving one strike out,
@@ -30,6 +33,10 @@ from .identify import FreeParameter, Weights, scene_value, simulate_task, strike
 from .strikes import RealStrike
 
 HOLD_KEY = 'hinge.friction_lever_mm'
+LATCH_KEY = 'geometry.latch_offset_deg'
+# the latched arm angle, contact angle + offset, must lie in [0, 15] degrees: a strike whose
+# angle cannot take an offset counts as failed at it
+DEFAULT_DAY_KEY = f'{LATCH_KEY}=-5:12'
 RELATIVE_STEP = 0.02
 
 
@@ -195,4 +202,5 @@ def left_out_summary(left_out: list[LeftOut]) -> dict[str, dict]:
     return out
 
 
-__all__ = ['HOLD_KEY', 'DayState', 'DayStateFit', 'LeftOut', 'day_scene', 'left_out_summary']
+__all__ = ['DEFAULT_DAY_KEY', 'HOLD_KEY', 'LATCH_KEY', 'DayState', 'DayStateFit', 'LeftOut',
+           'day_scene', 'left_out_summary']

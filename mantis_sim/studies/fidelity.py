@@ -16,6 +16,7 @@ from typing import Optional
 import numpy as np
 
 from mantis_sim.model import SimulationError
+from mantis_sim.parameters import ParameterError
 from mantis_sim.results import simulate
 from mantis_sim.scene import Scene
 
@@ -60,7 +61,11 @@ def simulate_strike(scene: Scene, strike: RealStrike, series: bool = True) -> Si
     if series:      # simulate through the whole window that is compared
         overrides.append(f'integration.post_peak_ms={SERIES_WINDOW_S[strike.medium][1] * 1e3!r}')
     try:
-        result = simulate(scene.with_overrides(overrides), dense=series)
+        at_conditions = scene.with_overrides(overrides)
+    except ParameterError as exc:   # e.g. a day's latch offset this strike's angle cannot take
+        return SimulatedStrike(strike.trial, 'failed', f'at its conditions: {exc}')
+    try:
+        result = simulate(at_conditions, dense=series)
     except (SimulationError, ArithmeticError) as exc:
         return SimulatedStrike(strike.trial, 'failed', f'{type(exc).__name__}: {exc}')
     m = result.metrics

@@ -8,6 +8,7 @@ import pytest
 
 from mantis_rig.cli import main as mantis
 from mantis_sim.model import kinetic_lever
+from mantis_sim.parameters import ParameterError
 from mantis_sim.scene import load_scene, load_scene_file
 from mantis_sim.studies import day_state as ds
 from mantis_sim.studies import fidelity
@@ -80,21 +81,60 @@ def test_day_state_writes_a_scene_per_day_that_runs(tmp_path, capsys):
                    '--cross-validate', '--json'])
     assert code == 0
     report = json.loads(capsys.readouterr().out)
-    assert report['key'] == ds.HOLD_KEY
+    assert report['key'] == ds.LATCH_KEY
     assert {d['day'] for d in report['days']} == {'011620', '011720'}
     assert report['leave_one_strike_out']['water_23mm']['strikes'] == 6
     day = next(d for d in report['days'] if d['day'] == '011620')
     scene = load_scene_file(out / 'water_23mm_011620.yaml')
     assert scene.name == 'water_23mm_011620'
-    assert scene.hinge.friction_lever_mm == pytest.approx(day['value'], rel=1e-5)
-    assert scene.hinge.kinetic_friction_lever_mm == pytest.approx(
-        kinetic_lever(load_scene('water_23mm')), rel=1e-5)
+    assert scene.geometry.latch_offset_deg == pytest.approx(day['value'], rel=1e-5, abs=1e-6)
+    assert scene.hinge == load_scene('water_23mm').hinge
     record = scene.provenance['day_state']
     assert record['day'] == '011620' and record['strikes'] == 3 and len(record['trials']) == 3
     assert scene.provenance['identified_by'] == 'mantis identify'
     run = fidelity.simulate_strike(scene, RealStrike('today', 'water', 23.0, 3.0, 2.3),
                                    series=False)
     assert run.status == 'strike'
+
+
+# --- where the arm sits on the latch -------------------------------------------------------------
+def test_the_latch_offset_moves_the_latched_arm_as_a_larger_contact_angle_would():
+    scene = load_scene('air_23mm')
+    offset = fidelity.simulate_strike(scene.with_values({ds.LATCH_KEY: 2.0}),
+                                      RealStrike('a', 'air', 23.0, 3.0, 2.3), series=False)
+    wider = fidelity.simulate_strike(scene, RealStrike('b', 'air', 23.0, 5.0, 2.3), series=False)
+    plain = fidelity.simulate_strike(scene, RealStrike('c', 'air', 23.0, 3.0, 2.3), series=False)
+    assert offset.peak_tip_speed_mps == pytest.approx(wider.peak_tip_speed_mps, rel=1e-9)
+    assert offset.spring_energy_mJ == pytest.approx(wider.spring_energy_mJ, rel=1e-9)
+    assert offset.spring_energy_mJ < plain.spring_energy_mJ - 3.0     # overcentres earlier
+
+
+def test_an_arm_latched_outside_its_range_is_refused_and_a_strike_there_fails_with_why():
+    scene = load_scene('air_23mm')
+    with pytest.raises(ParameterError, match='latch_offset_deg = -4.*latched arm at -1'):
+        scene.with_values({ds.LATCH_KEY: -4.0})
+    day = scene.with_values({ds.LATCH_KEY: -2.0})              # fine at 3 degrees ...
+    sim = fidelity.simulate_strike(day, RealStrike('t', 'air', 23.0, 1.0, 2.3), series=False)
+    assert sim.status == 'failed' and 'latched arm at -1' in sim.reason     # ... not at 1
+
+
+@pytest.mark.slow
+def test_each_day_s_latched_angle_is_recovered_from_its_peaks():
+    base = load_scene('air_23mm')
+    strikes = []
+    for day, offset in (('d1', -1.0), ('d2', 4.0)):
+        truth = base.with_values({ds.LATCH_KEY: offset})
+        for k, (pull, angle) in enumerate(((2.3, 3.0), (1.0, 3.5))):
+            strike = RealStrike(f'{day}_{k}', 'air', 23.0, angle, pull, day)
+            sim = fidelity.simulate_strike(truth, strike, series=False)
+            strikes.append(RealStrike(strike.trial, 'air', 23.0, angle, pull, day,
+                                      peak_tip_speed_mps=sim.peak_tip_speed_mps,
+                                      spring_energy_mJ=sim.spring_energy_mJ))
+    param = ident.parse_free_parameter(ds.DEFAULT_DAY_KEY, {'air_23mm': base})
+    fitted = {s.day: s.value for s in ds.DayStateFit({'air_23mm': base}, strikes, param,
+                                                     ident.Weights(), _serial).fit()}
+    assert fitted['d1'] == pytest.approx(-1.0, abs=0.05)
+    assert fitted['d2'] == pytest.approx(4.0, abs=0.05)
 
 
 @pytest.mark.parametrize('extra, message', [
