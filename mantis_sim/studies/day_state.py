@@ -26,10 +26,11 @@ import math
 import numpy as np
 
 from mantis_sim.model import kinetic_lever
+from mantis_sim.parameters import ParameterError
 from mantis_sim.scene import Scene
 
-from .fidelity import SimulatedStrike
-from .identify import FreeParameter, Weights, scene_value, simulate_task, strike_residuals
+from .fidelity import SimulatedStrike, simulate_strike, strike_overrides
+from .identify import FreeParameter, Weights, scene_value, strike_residuals
 from .strikes import RealStrike
 
 HOLD_KEY = 'hinge.friction_lever_mm'
@@ -69,6 +70,18 @@ def day_scene(scene: Scene, key: str, value: float, hold_braking: bool = True) -
     return scene.with_values(values)
 
 
+def simulate_day_task(task) -> SimulatedStrike:
+    """(scene, strike, with its series?, key, the day's value, hold_braking) -> the strike
+    simulated with the day's value at its own conditions; a value those conditions cannot take
+    (a latch offset that puts this strike's arm inside the body) is a failed strike."""
+    scene, strike, series, key, value, hold_braking = task
+    try:
+        day = day_scene(scene.with_overrides(strike_overrides(strike)), key, value, hold_braking)
+    except ParameterError as exc:
+        return SimulatedStrike(strike.trial, 'failed', f'at its conditions: {exc}')
+    return simulate_strike(day, strike, series=series)
+
+
 class DayStateFit:
     """Fits ``param`` per (group, recording day) with the scenes otherwise held; simulations
     go through ``mapper`` (mapper(function, tasks) -> results in order)."""
@@ -85,9 +98,9 @@ class DayStateFit:
                       for g, s in scenes.items()}
 
     def _simulate(self, pairs: list[tuple[RealStrike, float]]) -> list[SimulatedStrike]:
-        tasks = [(day_scene(self.scenes[s.group], self.param.key, v, self.hold_braking), s,
-                  s.series is not None) for s, v in pairs]
-        return self.mapper(simulate_task, tasks)
+        tasks = [(self.scenes[s.group], s, s.series is not None, self.param.key, v,
+                  self.hold_braking) for s, v in pairs]
+        return self.mapper(simulate_day_task, tasks)
 
     def _scale(self, value: float) -> float:
         p = self.param
@@ -203,4 +216,4 @@ def left_out_summary(left_out: list[LeftOut]) -> dict[str, dict]:
 
 
 __all__ = ['DEFAULT_DAY_KEY', 'HOLD_KEY', 'LATCH_KEY', 'DayState', 'DayStateFit', 'LeftOut',
-           'day_scene', 'left_out_summary']
+           'day_scene', 'left_out_summary', 'simulate_day_task']

@@ -149,3 +149,13 @@ def test_day_state_refuses_bad_input_before_any_work(tmp_path, capsys, extra, me
     assert code == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / 'o').exists()
+
+
+def test_a_day_s_offset_is_taken_at_the_strike_s_own_angle_not_the_scene_s():
+    """-4 degrees is outside what the scene's own 3 degrees can take, fine at a strike's 5."""
+    scene = load_scene('air_23mm')
+    strike = RealStrike('wide', 'air', 23.0, 5.0, 2.3)
+    held = ds.simulate_day_task((scene, strike, False, ds.LATCH_KEY, -4.0, True))
+    assert held.status == 'strike'
+    inside = ds.simulate_day_task((scene, strike, False, ds.LATCH_KEY, -6.0, True))
+    assert inside.status == 'failed' and 'latched arm at -1' in inside.reason
