@@ -473,9 +473,10 @@ which the fit does not see):
 
 **What differs by day is where the arm sits on the latch.** Fitted to a day's tip speeds and
 energies alone, the latched angle follows the arm angle tracked at overcentering:
-{latch_follows}. A day's own latched angle predicts its left-out strikes far better than a
-day's own hold (air at 23 mm: energy {latched_energy}, tip speed {latched_speed}). A day's
-hold cannot reach the days that store least: with no hold the model's arm leaves at
+{latch_follows}. A day's own latched angle predicts the energy of its left-out strikes far
+better than a day's own hold (air at 23 mm: {latched_energy}, against {held_energy} with the
+hold), their tip speed about as well ({latched_speed}, against {held_speed}). A day's hold
+cannot reach the days that store least: with no hold the model's arm leaves at
 overcentering, and on {floor} the real arm sits further out on the latch, so it overcentres
 earlier. The recorded contact angle does not carry this (below): the shipped scenes, judged
 at the recorded angle, keep `geometry.latch_offset_deg` at 0.
