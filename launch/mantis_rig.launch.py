@@ -59,7 +59,7 @@ def scene_conditions(scene):
     loaded = load_scene(scene)
     return {'pull_speed_mm_s': loaded.drive.pull_speed_mm_per_s,
             'medium': loaded.medium.name, 'd_t_mm': loaded.geometry.d_t_mm,
-            'contact_angle_deg': loaded.geometry.contact_angle_deg}
+            'contact_angle_deg': loaded.geometry.latched_angle_deg}     # where the arm rests
 
 
 def node_parameters(backend, scene, seed, real_time_factor, out):

@@ -79,11 +79,21 @@ def check_ranges(scene: Scene, ranges: list[Range]) -> None:
         if r.key in seen:
             raise DesignError(f'--vary {r.key}: given twice')
         seen.add(r.key)
+    for i, r in enumerate(ranges):
+        others = ranges[:i] + ranges[i + 1:]
         for end in (r.low, r.high):
-            try:
-                varied = scene.with_overrides([f'{r.key}={end!r}'])
-            except ParameterError as exc:
-                raise DesignError(f'--vary {r.key}={r.low:g}:{r.high:g}: {exc}') from None
+            # an end is refused only if no end of the other ranges makes it a valid design
+            # (keys that constrain each other, as contact angle and latch offset, vary together)
+            error = None
+            for combo in itertools.product(*((o.low, o.high) for o in others)):
+                values = {**dict(zip((o.key for o in others), combo)), r.key: end}
+                try:
+                    varied = scene.with_overrides([f'{k}={v!r}' for k, v in values.items()])
+                    break
+                except ParameterError as exc:
+                    error = error or exc
+            else:
+                raise DesignError(f'--vary {r.key}={r.low:g}:{r.high:g}: {error}')
             if not isinstance(_lookup(varied, r.key), (int, float)):
                 raise DesignError(f'--vary {r.key}: not a numeric parameter')
 

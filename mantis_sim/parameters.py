@@ -35,7 +35,8 @@ class Geometry:
                              -180.0, 180.0)
     beta_deg: float = param(140.24, 'deg', 'angle of the tendon attachment on the arm',
                             -180.0, 180.0)
-    contact_angle_deg: float = param(3.0, 'deg', 'arm-body contact (latch) angle phi_c',
+    contact_angle_deg: float = param(3.0, 'deg', 'contact (latch) angle phi_c, as recorded '
+                                     'for a strike; the arm rests at it + latch_offset_deg',
                                      0.0, 15.0)
     # Where the arm actually sits on the latch differs by the day's assembly: in the tracks it
     # is 0 to 11 degrees off the body, which the recorded contact angle does not say, and the
@@ -172,8 +173,8 @@ class Drive:
 @dataclass(frozen=True)
 class Initial:
     theta1_rad: float = param(2.4812, 'rad', 'start body angle', -2 * math.pi, 2 * math.pi)
-    theta3_deg: Optional[float] = param(None, 'deg', 'start arm angle (default: contact angle)',
-                                        0.0, 180.0)
+    theta3_deg: Optional[float] = param(None, 'deg', 'start arm angle (default: the latched '
+                                        'angle, contact + latch offset)', 0.0, 180.0)
 
 
 @dataclass(frozen=True)

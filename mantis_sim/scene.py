@@ -89,14 +89,15 @@ class Scene:
         return effect in self.effects
 
     def with_overrides(self, assignments: Iterable[str]) -> Scene:
-        """Apply `section.key=value` strings (values parsed as YAML scalars)."""
-        scene = self
+        """Apply `section.key=value` strings (values parsed as YAML scalars), all at once: keys
+        that constrain each other (contact angle and latch offset) are checked together."""
+        values = {}
         for text in assignments:
             key, sep, raw = text.partition('=')
             if not sep:
                 raise ParameterError(f'override {text!r} is not of the form section.key=value')
-            scene = scene.with_values({key.strip(): _parse_scalar(raw)})
-        return scene
+            values[key.strip()] = _parse_scalar(raw)
+        return self.with_values(values) if values else self
 
     def with_values(self, values: dict) -> Scene:
         """Apply {'section.key': value} (or 'effects': [...]) and re-validate."""
@@ -170,8 +171,8 @@ def _check_consistency(scene: Scene) -> None:
                              f'arm at {g.latched_angle_deg:g} degrees: it must lie in [0, 15]')
     theta3 = scene.initial.theta3_deg
     if theta3 is not None and theta3 < g.latched_angle_deg:
-        raise ParameterError(f'initial.theta3_deg = {theta3} is inside the body: it must be '
-                             f'>= geometry.contact_angle_deg + latch_offset_deg = '
+        raise ParameterError(f'initial.theta3_deg = {theta3} is below the latched arm: it must '
+                             f'be >= geometry.contact_angle_deg + latch_offset_deg = '
                              f'{g.latched_angle_deg:g}')
 
 

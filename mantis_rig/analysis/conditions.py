@@ -95,7 +95,7 @@ def params_for_trial(conditions: dict, params: AnalysisParams | None = None,
             d_t_mm=g.d_t_mm, tendon_L1_mm=g.L1_mm,
             theta1_rest_rad=math.pi + math.radians(g.alpha_deg),
             k_s_Nmm_per_rad=scene.spring.k_Nmm_per_rad,
-            contact_angle_rad=math.radians(g.contact_angle_deg),
+            contact_angle_rad=math.radians(g.latched_angle_deg),     # where the arm rests
             # The simulated camera looks at the mechanism's frame with image y flipped: its
             # x axis runs from the body pivot towards the tendon guide.
             guide_direction_cam_rad=0.0,

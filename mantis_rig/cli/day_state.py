@@ -18,6 +18,7 @@ import re
 import yaml
 
 from mantis_sim.errors import InputError
+from mantis_sim.parameters import ParameterError
 from mantis_sim.studies import day_state as ds
 from mantis_sim.studies import identify as ident
 from mantis_sim.studies.parallel import ClusterMap
@@ -81,53 +82,62 @@ def run_day_state(args) -> int:
         model = ds.DayStateFit(scenes, chosen, param, weights, mapper)
         states = model.fit(args.iterations, log=_log)
         left_out = model.leave_one_out() if args.cross_validate else []
-    written = (_write_scenes(args.out, scenes, paths, param, states, chosen)
-               if args.out else [])
+    written, not_written = (_write_scenes(args.out, scenes, paths, param, states, chosen)
+                            if args.out else ([], []))
     report = {'key': param.label,
               'days': [{'group': s.group, 'day': s.day, 'value': s.value,
                         'std_error': s.std_error, 'strikes': s.strikes,
                         'at_bound': s.at_bound}
                        for s in states],
-              'scenes': written}
+              'failed_strikes': [f for s in states for f in s.failed],
+              'scenes': written, 'scenes_not_written': not_written}
     if args.cross_validate:
         report['leave_one_strike_out'] = ds.left_out_summary(left_out)
     print(json.dumps(json_safe(report)) if args.json else _text(report))
     return 0
 
 
-def _write_scenes(out: Path, scenes, paths, param, states, strikes) -> list[str]:
-    """One scene file per (group, day): the group's file with the day's value (and, for the
-    hold, the scene's braking pinned), its day state on record in the provenance."""
-    out.mkdir(parents=True, exist_ok=True)
-    written = []
+def _write_scenes(out: Path, scenes, paths, param, states, strikes) -> tuple[list, list]:
+    """One scene file per (group, day): the group's file at the day's mean contact angle with
+    the day's value (and, for the hold, the scene's braking pinned), its day state on record in
+    the provenance. Every day is checked before any file is written; a day whose value its mean
+    angle cannot take is not written, with the reason. Returns (written, not written)."""
+    docs, refused = [], []
     for state in states:
+        day = [s for s in strikes if (s.group, s.recording_day) == (state.group, state.day)]
+        angle = float(f'{sum(s.contact_angle_deg for s in day) / len(day):.6g}')
+        base = scenes[state.group]
+        values = {'geometry.contact_angle_deg': angle,
+                  **ds.day_values(base, param.key, state.value)}
+        try:
+            base.with_values(values)
+        except ParameterError as exc:
+            refused.append(f'{state.group} {state.day}: {exc}')
+            continue
         doc = yaml.safe_load(paths[state.group].read_text(encoding='utf-8'))
-        scene = ds.day_scene(scenes[state.group], param.key, state.value)
-        for key in (param.key, 'hinge.kinetic_friction_lever_mm'):
+        for key, value in values.items():
             section, _, field = key.partition('.')
-            value = getattr(getattr(scene, section), field)
-            if value is not None:
-                doc.setdefault(section, {})[field] = float(f'{value:.6g}')
+            doc.setdefault(section, {})[field] = float(f'{value:.6g}')
         scene_name = f'{state.group}_{state.day}'
         doc['name'] = scene_name
         doc['description'] = (f'{(doc.get("description") or "").strip()} Recording day '
-                              f'{state.day}: {param.key} fitted to that day\'s strikes '
-                              f'(mantis day-state).').strip()
+                              f'{state.day}: {param.key} fitted to that day\'s strikes, at '
+                              f'their mean contact angle (mantis day-state).').strip()
         provenance = doc.setdefault('provenance', {})
         for label, entry in (provenance.get('parameters') or {}).items():
             key, groups = ident.split_label(label)
-            if key == param.key and (groups is None or state.group in groups):
+            if key in values and (groups is None or state.group in groups):
                 entry['superseded_by'] = 'day_state'
         provenance['day_state'] = {
             'key': param.key, 'day': state.day, 'value': float(f'{state.value:.6g}'),
             'std_error': float(f'{state.std_error:.3g}'), 'strikes': state.strikes,
-            'trials': [s.trial for s in strikes
-                       if s.group == state.group and s.recording_day == state.day],
+            'trials': [s.trial for s in day],
             'date': datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds')}
-        target = out / f'{scene_name}.yaml'
+        docs.append((out / f'{scene_name}.yaml', doc))
+    out.mkdir(parents=True, exist_ok=True)
+    for target, doc in docs:
         target.write_text(yaml.safe_dump(doc, sort_keys=False, width=100), encoding='utf-8')
-        written.append(str(target))
-    return written
+    return [str(target) for target, _ in docs], refused
 
 
 def _text(report: dict) -> str:
@@ -147,8 +157,12 @@ def _text(report: dict) -> str:
                          f'{_pct(e["tip_speed_own_day"])}            '
                          f'{_pct(e["spring_energy_shared"])} -> '
                          f'{_pct(e["spring_energy_own_day"])}')
+    for failed in report['failed_strikes']:
+        lines.append(f'failed at its day\'s value: {failed}')
     if report['scenes']:
         lines.append('scenes: ' + ', '.join(report['scenes']))
+    for refused in report['scenes_not_written']:
+        lines.append(f'not written: {refused}')
     return '\n'.join(lines)
 
 

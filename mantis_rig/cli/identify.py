@@ -204,6 +204,8 @@ def _identify_report(fit, folds, written) -> dict:
                         for a, b, rho in fit.inseparable_pairs()],
         'at_bounds': fit.at_bounds(),
         'fitted_errors': ident.error_summary(fit.strikes, fit.simulated),
+        'not_struck': [{'trial': m.trial, 'status': m.status, 'reason': m.reason}
+                       for m in fit.simulated if m.status != 'strike'],
         'evaluations': fit.evaluations, 'wall_s': fit.wall_s, 'scenes': written,
     }
     if folds:
@@ -231,6 +233,8 @@ def _identify_text(report: dict) -> str:
         lines += _error_lines(report['cross_validated_errors'])
         for day, errors in report['cross_validation_by_day'].items():
             lines += [f'  day {day}: ' + line.strip() for line in _error_lines(errors)]
+    for r in report['not_struck']:
+        lines.append(f'{r["status"]} at the fitted values: {r["trial"]}: {r["reason"]}')
     lines.append(f'{report["evaluations"]} evaluations of every strike in '
                  f'{report["wall_s"]:.0f} s; calibrated scenes: {", ".join(report["scenes"])}')
     return '\n'.join(lines)
@@ -271,7 +275,7 @@ def run_compare(args) -> int:
     report = {'groups': {key: fidelity.group_summary(rows, key)
                          for key, _, _ in fidelity.COMPARED},
               'effects': fidelity.effect_slopes(rows),
-              'not_struck': [{'trial': r['trial'], 'reason': r['reason']}
+              'not_struck': [{'trial': r['trial'], 'status': r['status'], 'reason': r['reason']}
                              for r in rows if r['status'] != 'strike'],
               'outputs': sorted(str(p) for p in args.out.iterdir())}
     if args.json:
@@ -301,6 +305,6 @@ def _compare_text(report: dict) -> str:
         lines.append(f'{e["effect"]:56s} {e["real"]:+7.3f} +- {e["real_std_error"]:.3f}  '
                      f'{e["sim"]:+7.3f} {e["unit"]}  {mark}')
     for r in report['not_struck']:
-        lines.append(f'no strike: {r["trial"]}: {r["reason"]}')
+        lines.append(f'{r["status"]}: {r["trial"]}: {r["reason"]}')
     lines.append('outputs: ' + ', '.join(report['outputs']))
     return '\n'.join(lines)

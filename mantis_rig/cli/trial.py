@@ -113,7 +113,8 @@ def stack_config(args):
         scene = load_scene(args.scene, scene_overrides)   # SceneError, ParameterError
         conditions.update(pull_speed_mm_s=scene.drive.pull_speed_mm_per_s,
                           medium=scene.medium.name, d_t_mm=scene.geometry.d_t_mm,
-                          contact_angle_deg=scene.geometry.contact_angle_deg)
+                          # where the simulated arm rests: what the rig's user measures
+                          contact_angle_deg=scene.geometry.latched_angle_deg)
     elif scene_overrides:
         raise ConditionError(f'unknown supervisor parameter(s) {scene_overrides} (scene '
                              f'parameters only apply to the sim backend)')

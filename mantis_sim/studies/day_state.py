@@ -26,11 +26,10 @@ import math
 import numpy as np
 
 from mantis_sim.model import kinetic_lever
-from mantis_sim.parameters import ParameterError
 from mantis_sim.scene import Scene
 
-from .fidelity import SimulatedStrike, simulate_strike, strike_overrides
-from .identify import FreeParameter, Weights, scene_value, strike_residuals
+from .fidelity import SimulatedStrike
+from .identify import FreeParameter, Weights, scene_value, simulate_task, strike_residuals
 from .strikes import RealStrike
 
 HOLD_KEY = 'hinge.friction_lever_mm'
@@ -49,6 +48,7 @@ class DayState:
     std_error: float
     strikes: int
     at_bound: bool
+    failed: tuple = ()          # 'trial: reason' of the day's strikes that failed at its value
 
 
 @dataclass(frozen=True)
@@ -61,25 +61,18 @@ class LeftOut:
     own_day: SimulatedStrike
 
 
-def day_scene(scene: Scene, key: str, value: float, hold_braking: bool = True) -> Scene:
-    """The scene with the day's value of key; when it is the hold, the braking stays the
-    scene's (unless not ``hold_braking``: then it follows the hold, mu_k/mu_s fixed)."""
+def day_values(scene: Scene, key: str, value: float, hold_braking: bool = True) -> dict:
+    """{key: value} for the day; when the key is the hold, the braking stays the scene's
+    (unless not ``hold_braking``: then it follows the hold, mu_k/mu_s fixed)."""
     values = {key: value}
     if hold_braking and key == HOLD_KEY and scene.has('pivot_friction'):
         values['hinge.kinetic_friction_lever_mm'] = min(kinetic_lever(scene), value)
-    return scene.with_values(values)
+    return values
 
 
-def simulate_day_task(task) -> SimulatedStrike:
-    """(scene, strike, with its series?, key, the day's value, hold_braking) -> the strike
-    simulated with the day's value at its own conditions; a value those conditions cannot take
-    (a latch offset that puts this strike's arm inside the body) is a failed strike."""
-    scene, strike, series, key, value, hold_braking = task
-    try:
-        day = day_scene(scene.with_overrides(strike_overrides(strike)), key, value, hold_braking)
-    except ParameterError as exc:
-        return SimulatedStrike(strike.trial, 'failed', f'at its conditions: {exc}')
-    return simulate_strike(day, strike, series=series)
+def day_scene(scene: Scene, key: str, value: float, hold_braking: bool = True) -> Scene:
+    """The scene with the day's value of key (day_values)."""
+    return scene.with_values(day_values(scene, key, value, hold_braking))
 
 
 class DayStateFit:
@@ -98,9 +91,10 @@ class DayStateFit:
                       for g, s in scenes.items()}
 
     def _simulate(self, pairs: list[tuple[RealStrike, float]]) -> list[SimulatedStrike]:
-        tasks = [(self.scenes[s.group], s, s.series is not None, self.param.key, v,
-                  self.hold_braking) for s, v in pairs]
-        return self.mapper(simulate_day_task, tasks)
+        tasks = [(self.scenes[s.group], s, s.series is not None,
+                  day_values(self.scenes[s.group], self.param.key, v, self.hold_braking))
+                 for s, v in pairs]
+        return self.mapper(simulate_task, tasks)
 
     def _scale(self, value: float) -> float:
         p = self.param
@@ -138,16 +132,16 @@ class DayStateFit:
         for s in self.strikes:
             members.setdefault((s.group, s.recording_day), []).append(s)
         value = {d: self.start[d[0]] for d in members}
-        best: dict = {}                 # day -> (cost, value, residuals, derivative)
+        best: dict = {}         # day -> (cost, value, residuals, derivative, simulations)
         for iteration in range(iterations + 1):
-            for d, (r, j, _) in self._jacobians(members, value).items():
+            for d, (r, j, sims) in self._jacobians(members, value).items():
                 if d not in best or float(r @ r) <= best[d][0]:
-                    best[d] = (float(r @ r), value[d], r, j)
+                    best[d] = (float(r @ r), value[d], r, j, sims)
             if iteration == iterations:
                 break
             new = {}
             for d in members:
-                _, at, r, j = best[d]
+                _, at, r, j, _ = best[d]
                 # from the best value on: its Gauss-Newton step, or back towards it if the last
                 # step from it raised the cost
                 new[d] = (_gauss_newton(at, r, j, p) if value[d] == at
@@ -161,11 +155,12 @@ class DayStateFit:
             value = new
         out = []
         for d in sorted(members):
-            _, at, r, j = best[d]
+            _, at, r, j, sims = best[d]
+            failed = tuple(f'{m.trial}: {m.reason}' for m in sims if m.status != 'strike')
             jj = float(j @ j)
             std = math.sqrt(float(r @ r) / max(r.size - 1, 1) / jj) if jj > 0 else math.inf
             at_bound = min(at - p.lower, p.upper - at) <= 1e-3 * (p.upper - p.lower)
-            out.append(DayState(d[0], d[1], at, std, len(members[d]), at_bound))
+            out.append(DayState(d[0], d[1], at, std, len(members[d]), at_bound, failed))
         return out
 
     def leave_one_out(self) -> list[LeftOut]:
@@ -216,4 +211,4 @@ def left_out_summary(left_out: list[LeftOut]) -> dict[str, dict]:
 
 
 __all__ = ['DEFAULT_DAY_KEY', 'HOLD_KEY', 'LATCH_KEY', 'DayState', 'DayStateFit', 'LeftOut',
-           'day_scene', 'left_out_summary', 'simulate_day_task']
+           'day_scene', 'day_values', 'left_out_summary']

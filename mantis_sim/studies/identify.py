@@ -34,10 +34,10 @@ import numpy as np
 
 from mantis_sim.errors import InputError
 from mantis_sim.model import kinetic_lever
-from mantis_sim.parameters import SECTIONS
+from mantis_sim.parameters import SECTIONS, ParameterError
 from mantis_sim.scene import Scene
 
-from .fidelity import SimulatedStrike, real_on_grid, simulate_strike
+from .fidelity import SimulatedStrike, real_on_grid, simulate_strike, strike_overrides
 from .strikes import RealStrike
 
 CORRELATION_WARNING = 0.9
@@ -253,10 +253,9 @@ class Identification:
         return out
 
 
-def scene_for_group(base: Scene, params: Sequence[FreeParameter], values, group: str) -> Scene:
-    """The group's scene with every free parameter that applies to it set."""
-    chosen = {p.key: float(v) for p, v in zip(params, values) if p.applies_to(group)}
-    return base.with_values(chosen) if chosen else base
+def values_for_group(params: Sequence[FreeParameter], values, group: str) -> dict:
+    """{key: value} of every free parameter that applies to the group."""
+    return {p.key: float(v) for p, v in zip(params, values) if p.applies_to(group)}
 
 
 def strike_residuals(strike: RealStrike, sim: SimulatedStrike, weights: Weights) -> np.ndarray:
@@ -289,10 +288,18 @@ def strike_residuals(strike: RealStrike, sim: SimulatedStrike, weights: Weights)
     return np.asarray(out, dtype=float)
 
 
-def simulate_task(task):
-    """(scene, strike, with its series?) -> SimulatedStrike; a task for the workers."""
-    scene, strike, series = task
-    return simulate_strike(scene, strike, series=series)
+def simulate_task(task) -> SimulatedStrike:
+    """(scene, strike, with its series?, {key: value}) -> the strike simulated at its own
+    conditions with those values, all set together (a latch offset is checked against the
+    strike's own contact angle); values its conditions cannot take make a failed strike with
+    the reason. A task for the workers."""
+    scene, strike, series, values = task
+    assignments = strike_overrides(strike) + [f'{k}={v!r}' for k, v in values.items()]
+    try:
+        at_conditions = scene.with_overrides(assignments)
+    except ParameterError as exc:
+        return SimulatedStrike(strike.trial, 'failed', f'at its conditions: {exc}')
+    return simulate_strike(at_conditions, strike, series=series)
 
 
 class StrikeModel:
@@ -312,9 +319,9 @@ class StrikeModel:
     def simulate(self, value_sets: list[np.ndarray]) -> list[list[SimulatedStrike]]:
         tasks = []
         for values in value_sets:
-            scenes = {g: scene_for_group(s, self.params, values, g)
-                      for g, s in self.scenes.items()}
-            tasks.extend((scenes[s.group], s, s.series is not None) for s in self.strikes)
+            tasks.extend((self.scenes[s.group], s, s.series is not None,
+                          values_for_group(self.params, values, s.group))
+                         for s in self.strikes)
         results = self.mapper(simulate_task, tasks)
         self.evaluations += len(value_sets)
         n = len(self.strikes)
@@ -496,7 +503,7 @@ def cross_validate(model: StrikeModel, fitted: np.ndarray, max_iterations: int =
 __all__ = ['CORRELATION_WARNING', 'FoldResult', 'FreeParameter', 'Identification',
            'IdentificationError', 'Loss', 'StrikeModel', 'Weights', 'cross_validate',
            'cross_validate_one_step', 'identify', 'scene_value', 'simulate_task',
-           'parse_free_parameter', 'scene_for_group', 'strike_residuals']
+           'parse_free_parameter', 'strike_residuals', 'values_for_group']
 
 
 def error_summary(strikes: list[RealStrike], simulated: list[SimulatedStrike]) -> dict:

@@ -155,7 +155,45 @@ def test_a_day_s_offset_is_taken_at_the_strike_s_own_angle_not_the_scene_s():
     """-4 degrees is outside what the scene's own 3 degrees can take, fine at a strike's 5."""
     scene = load_scene('air_23mm')
     strike = RealStrike('wide', 'air', 23.0, 5.0, 2.3)
-    held = ds.simulate_day_task((scene, strike, False, ds.LATCH_KEY, -4.0, True))
+    held = ident.simulate_task((scene, strike, False, {ds.LATCH_KEY: -4.0}))
     assert held.status == 'strike'
-    inside = ds.simulate_day_task((scene, strike, False, ds.LATCH_KEY, -6.0, True))
+    inside = ident.simulate_task((scene, strike, False, {ds.LATCH_KEY: -6.0}))
     assert inside.status == 'failed' and 'latched arm at -1' in inside.reason
+
+
+def test_a_day_its_mean_angle_cannot_take_is_not_written_and_says_why(tmp_path):
+    from pathlib import Path
+
+    from mantis_rig.cli import day_state as cli
+    from mantis_sim.scene import available_scenes
+    scene = load_scene('water_23mm')
+    strikes = [RealStrike(f'{day}_{k}', 'water', 23.0, 3.0, 2.3, day)
+               for day in ('ok', 'bad') for k in range(2)]
+    states = [ds.DayState('water_23mm', 'ok', 1.5, 0.1, 2, False),
+              ds.DayState('water_23mm', 'bad', -4.0, 0.1, 2, False)]
+    param = ident.parse_free_parameter(ds.DEFAULT_DAY_KEY, {'water_23mm': scene})
+    written, refused = cli._write_scenes(tmp_path, {'water_23mm': scene},
+                                         {'water_23mm': Path(available_scenes()['water_23mm'])},
+                                         param, states, strikes)
+    assert [Path(p).name for p in written] == ['water_23mm_ok.yaml']
+    assert load_scene_file(tmp_path / 'water_23mm_ok.yaml').geometry.latched_angle_deg == 4.5
+    assert len(refused) == 1 and refused[0].startswith('water_23mm bad:')
+    assert 'latched arm at -1' in refused[0]
+    assert not (tmp_path / 'water_23mm_bad.yaml').exists()
+
+
+def test_keys_that_constrain_each_other_are_varied_and_set_together():
+    """A sweep of contact angle 5-8 with latch offset -4-0 holds only valid designs (1-8
+    degrees): its ranges are accepted and each design runs, whichever key comes first; ranges
+    with no valid design at all are refused before any work."""
+    from mantis_sim import designs
+    scene = load_scene('air_23mm')
+    ranges = [designs.parse_range('geometry.latch_offset_deg=-4:0:2'),
+              designs.parse_range('geometry.contact_angle_deg=5:8:2')]
+    designs.check_ranges(scene, ranges)
+    row = designs.run_design(scene, {'geometry.latch_offset_deg': -4.0,
+                                     'geometry.contact_angle_deg': 5.0})
+    assert row['status'] == designs.STATUS_OK
+    with pytest.raises(designs.DesignError, match='latched arm at'):
+        designs.check_ranges(scene, [designs.parse_range('geometry.latch_offset_deg=-9:-8:2'),
+                                     designs.parse_range('geometry.contact_angle_deg=1:2:2')])

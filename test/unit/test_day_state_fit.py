@@ -18,10 +18,10 @@ def energy_mJ(hold_mm):
 
 
 def made_up_mapper(function, tasks):
-    assert function is ds.simulate_day_task
+    assert function is ident.simulate_task
     out = []
-    for scene, strike, _, key, value, hold_braking in tasks:
-        hold = ds.day_scene(scene, key, value, hold_braking).hinge.friction_lever_mm
+    for scene, strike, _, values in tasks:
+        hold = scene.with_values(values).hinge.friction_lever_mm
         out.append(SimulatedStrike(strike.trial, 'strike', '', 25.0 + 10.0 * hold,
                                    energy_mJ(hold)))
     return out
