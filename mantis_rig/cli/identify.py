@@ -44,6 +44,12 @@ def add_commands(commands) -> None:
                            metavar='KEY[@GROUP[+GROUP]][=LO:HI]',
                            help='a parameter to fit, for all groups or only the named ones, '
                                 'within bounds (default: its valid range); repeatable')
+    ident_cmd.add_argument('--per-day', action='append', default=[],
+                           metavar='KEY[@GROUP[+GROUP]][=LO:HI]',
+                           help='also fit this key for each recording day on its own, as a '
+                                'nuisance: a day\'s state (e.g. geometry.latch_offset_deg=-5:12) '
+                                'kept in the provenance, not in the scene; a left-out day is '
+                                'predicted at the scene\'s value; repeatable')
     ident_cmd.add_argument('--out', type=Path, required=True,
                            help='folder for the calibrated scenes (<group scene>.yaml)')
     ident_cmd.add_argument('--iterations', type=int, default=6,
@@ -155,6 +161,9 @@ def run_identify(args) -> int:
     strikes = _load_strikes(args)
     scenes, paths = _scenes(args, strikes)
     params = [ident.parse_free_parameter(text, scenes) for text in args.fit]
+    for text in args.per_day:
+        params += ident.per_day_parameters(
+            ident.parse_free_parameter(text, scenes, option='--per-day'), strikes)
     weights = ident.Weights.parse(args.weight)
     loss = ident.Loss.parse(args.loss)
     if args.iterations < 1:

@@ -157,19 +157,38 @@ class Loss:
 
 @dataclass(frozen=True)
 class FreeParameter:
-    """A scene key set free, for every group or only for the named ones, within bounds."""
+    """A scene key set free, for every group or only for the named ones, within bounds; with a
+    recording day, only for that day's strikes (a day's state: a nuisance parameter, kept in
+    the provenance, not in the scene)."""
 
     key: str
     lower: float
     upper: float
     groups: Optional[tuple] = None
+    day: Optional[str] = None
 
     @property
     def label(self) -> str:
-        return self.key if self.groups is None else f'{self.key}@{"+".join(self.groups)}'
+        label = self.key if self.groups is None else f'{self.key}@{"+".join(self.groups)}'
+        return label if self.day is None else f'{label}#{self.day}'
 
     def applies_to(self, group: str) -> bool:
         return self.groups is None or group in self.groups
+
+    def applies_to_strike(self, strike: RealStrike) -> bool:
+        return self.applies_to(strike.group) and self.day in (None, strike.recording_day)
+
+
+def per_day_parameters(param: FreeParameter, strikes: Sequence[RealStrike]) -> list:
+    """One copy of ``param`` for each (group, recording day) of the strikes it applies to."""
+    days = sorted({(s.group, s.recording_day) for s in strikes if param.applies_to(s.group)})
+    undated = sorted({s.trial for s in strikes if param.applies_to(s.group)
+                      and not s.recording_day})
+    if undated:
+        raise IdentificationError(f'--per-day {param.label}: strikes without a recording_day '
+                                  f'({", ".join(undated[:5])})')
+    return [FreeParameter(param.key, param.lower, param.upper, (group,), day)
+            for group, day in days]
 
 
 def split_label(label: str) -> tuple[str, Optional[tuple]]:
@@ -253,9 +272,9 @@ class Identification:
         return out
 
 
-def values_for_group(params: Sequence[FreeParameter], values, group: str) -> dict:
-    """{key: value} of every free parameter that applies to the group."""
-    return {p.key: float(v) for p, v in zip(params, values) if p.applies_to(group)}
+def values_for_strike(params: Sequence[FreeParameter], values, strike: RealStrike) -> dict:
+    """{key: value} of every free parameter that applies to the strike (its group, its day)."""
+    return {p.key: float(v) for p, v in zip(params, values) if p.applies_to_strike(strike)}
 
 
 def strike_residuals(strike: RealStrike, sim: SimulatedStrike, weights: Weights) -> np.ndarray:
@@ -320,7 +339,7 @@ class StrikeModel:
         tasks = []
         for values in value_sets:
             tasks.extend((self.scenes[s.group], s, s.series is not None,
-                          values_for_group(self.params, values, s.group))
+                          values_for_strike(self.params, values, s))
                          for s in self.strikes)
         results = self.mapper(simulate_task, tasks)
         self.evaluations += len(value_sets)
@@ -458,13 +477,23 @@ def cross_validate_one_step(model: StrikeModel, fit: Identification,
         weights = fit.loss.row_weights(fit.residual[keep])
         j, r = fit.jacobian[keep] * weights[:, None], fit.residual[keep] * weights
         step = -np.linalg.pinv(j.T @ j) @ (j.T @ r)
-        values = np.clip(fit.values + step, lower, upper)
+        values = _without_the_day(model, np.clip(fit.values + step, lower, upper), day)
         test = [s for s in model.strikes if s.recording_day == day]
         predicted = StrikeModel(model.scenes, test, model.params, model.weights,
                                 model.mapper).simulate([values])[0]
         log(f'left out {day}: {len(test)} strikes')
         folds.append(FoldResult(day, test, predicted, values))
     return folds
+
+
+def _without_the_day(model: StrikeModel, values: np.ndarray, day: str) -> np.ndarray:
+    """The values with the left-out day's own parameters (--per-day) at the scene's value: a
+    day the fit has not seen is predicted as the scene stands for any day."""
+    values = values.copy()
+    for i, p in enumerate(model.params):
+        if p.day == day:
+            values[i] = _default_value(model.scenes, p)
+    return values
 
 
 def _days(model: StrikeModel) -> list[str]:
@@ -485,14 +514,15 @@ def cross_validate(model: StrikeModel, fitted: np.ndarray, max_iterations: int =
         train = [s for s in model.strikes if s.recording_day != day]
         test = [s for s in model.strikes if s.recording_day == day]
         train_groups = {s.group for s in train}
-        free = [p for p in model.params if p.groups is None or set(p.groups) & train_groups]
+        free = [p for p in model.params if (p.groups is None or set(p.groups) & train_groups)
+                and p.day != day]
         fixed = [(p, v) for p, v in zip(model.params, fitted) if p not in free]
         sub = StrikeModel(model.scenes, train, free, model.weights, model.mapper)
         start = [v for p, v in zip(model.params, fitted) if p in free]
         fit = identify(sub, start, max_iterations=max_iterations, loss=loss)
         values = dict(zip(free, fit.values))
         values.update(dict(fixed))
-        full = np.array([values[p] for p in model.params])
+        full = _without_the_day(model, np.array([values[p] for p in model.params]), day)
         predicted = StrikeModel(model.scenes, test, model.params, model.weights,
                                 model.mapper).simulate([full])[0]
         log(f'left out {day}: {len(test)} strikes')
@@ -503,7 +533,8 @@ def cross_validate(model: StrikeModel, fitted: np.ndarray, max_iterations: int =
 __all__ = ['CORRELATION_WARNING', 'FoldResult', 'FreeParameter', 'Identification',
            'IdentificationError', 'Loss', 'StrikeModel', 'Weights', 'cross_validate',
            'cross_validate_one_step', 'identify', 'scene_value', 'simulate_task',
-           'parse_free_parameter', 'strike_residuals', 'values_for_group']
+           'parse_free_parameter', 'per_day_parameters', 'strike_residuals',
+           'values_for_strike']
 
 
 def error_summary(strikes: list[RealStrike], simulated: list[SimulatedStrike]) -> dict:
@@ -529,13 +560,17 @@ def calibrated_scene(base: dict, fit: Identification, group: str,
     and keeps parameters this fit held, that fit stays on record as an earlier stage."""
     doc = {k: (dict(v) if isinstance(v, dict) else v) for k, v in base.items()}
     earlier = doc.pop('provenance', None) or {}
-    labels = [p.label for p in fit.parameters]
-    parameters = {}
+    labels = [p.label for p in fit.parameters if p.day is None]
+    parameters, day_states = {}, {}
     for p, value, std, start in zip(fit.parameters, fit.values, fit.std_errors, fit.initial):
         entry = {'value': float(f'{value:.6g}'), 'std_error': float(f'{std:.3g}'),
                  'bounds': [p.lower, p.upper], 'start': float(f'{start:.6g}')}
         if p.label in fit.at_bounds():
             entry['at_bound'] = True
+        if p.day is not None:           # a day's state: on record, the scene keeps its value
+            if p.applies_to(group):
+                day_states[p.label] = entry
+            continue
         if p.applies_to(group):
             section, _, name = p.key.partition('.')
             doc.setdefault(section, {})[name] = entry['value']
@@ -543,8 +578,9 @@ def calibrated_scene(base: dict, fit: Identification, group: str,
             entry['applies_to'] = list(p.groups or ())
         parameters[p.label] = entry
     held, stages = _held_from_earlier_stages(earlier, parameters)
-    correlation = {a: {b: float(f'{fit.correlation[i, j]:.3f}') for j, b in enumerate(labels)
-                       if j != i} for i, a in enumerate(labels)}
+    index = [i for i, p in enumerate(fit.parameters) if p.day is None]
+    correlation = {a: {b: float(f'{fit.correlation[i, j]:.3f}') for j, b in zip(index, labels)
+                       if j != i} for i, a in zip(index, labels)}
     provenance = {
         'identified_by': 'mantis identify',
         'date': fit.started,
@@ -568,6 +604,8 @@ def calibrated_scene(base: dict, fit: Identification, group: str,
         provenance['cross_validation'] = cv_method
         provenance['cross_validation_by_day'] = {
             f.left_out: error_summary(f.strikes, f.simulated) for f in folds}
+    if day_states:
+        provenance['day_states'] = day_states
     if stages:
         provenance['earlier_stages'] = stages
     doc['provenance'] = provenance

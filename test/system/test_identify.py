@@ -358,3 +358,37 @@ def test_a_fit_of_a_key_the_scene_leaves_unset_starts_from_what_the_model_uses()
     assert ident._default_value({'air_23mm': scene}, param) == kinetic_lever(scene)
     with pytest.raises(ident.IdentificationError, match='integration.t_end_s is unset'):
         ident.scene_value(scene, 'integration.t_end_s')
+
+
+@pytest.mark.slow
+def test_a_global_parameter_is_identified_beside_each_day_s_own_state():
+    """Strikes made on the model with a blade drag it did not know and the arm sitting
+    differently on the latch each day: --per-day fits each day's offset as a nuisance, the
+    drag as the robot's; a left-out day is predicted at the scene's offset, and the calibrated
+    scene keeps the day states in its provenance, not in its values."""
+    base = load_scene('air_23mm')
+    truth = {'d1': 2.0, 'd2': -1.0}
+    strikes = []
+    for day, offset in truth.items():
+        scene = base.with_values({'arm.blade_drag_broadside': 1.6,
+                                  'geometry.latch_offset_deg': offset})
+        strikes += [s for s in _made_up_strikes(scene, [(2.3, 3.0, day), (1.0, 3.5, day)])]
+    scenes = {'air_23mm': base}
+    params = [ident.parse_free_parameter('arm.blade_drag_broadside=0.5:4', scenes)]
+    params += ident.per_day_parameters(
+        ident.parse_free_parameter('geometry.latch_offset_deg=-5:12', scenes), strikes)
+    assert [p.label for p in params[1:]] == ['geometry.latch_offset_deg@air_23mm#d1',
+                                             'geometry.latch_offset_deg@air_23mm#d2']
+    model = ident.StrikeModel(scenes, strikes, params, ident.Weights(),
+                              lambda f, items: [f(i) for i in items])
+    fit = ident.identify(model, max_iterations=12)
+    assert fit.values == pytest.approx([1.6, 2.0, -1.0], abs=0.03)
+    folds = {f.left_out: f for f in ident.cross_validate_one_step(model, fit)}
+    assert folds['d1'].values[1] == 0.0 and folds['d2'].values[2] == 0.0
+    doc = ident.calibrated_scene({'name': 'air_23mm', 'effects': []}, fit, 'air_23mm')
+    assert doc['arm']['blade_drag_broadside'] == pytest.approx(1.6, abs=0.03)
+    assert 'geometry' not in doc
+    states = doc['provenance']['day_states']
+    assert states['geometry.latch_offset_deg@air_23mm#d1']['value'] == pytest.approx(2.0,
+                                                                                      abs=0.03)
+    assert set(doc['provenance']['parameters']) == {'arm.blade_drag_broadside'}
