@@ -161,9 +161,10 @@ def run_identify(args) -> int:
     strikes = _load_strikes(args)
     scenes, paths = _scenes(args, strikes)
     params = [ident.parse_free_parameter(text, scenes) for text in args.fit]
-    for text in args.per_day:
-        params += ident.per_day_parameters(
-            ident.parse_free_parameter(text, scenes, option='--per-day'), strikes)
+    per_day = [ident.parse_free_parameter(text, scenes, option='--per-day')
+               for text in args.per_day]
+    for param in per_day:
+        params += ident.per_day_parameters(param, strikes)
     weights = ident.Weights.parse(args.weight)
     loss = ident.Loss.parse(args.loss)
     if args.iterations < 1:
@@ -176,7 +177,8 @@ def run_identify(args) -> int:
         _log(f'identify: {len(strikes)} strikes ({", ".join(sorted(scenes))}), '
              f'{len(params)} parameters, on {mapper.where} ({mapper.worker_count} worker(s))')
         model = ident.StrikeModel(scenes, strikes, params, weights, mapper)
-        fit = ident.identify(model, max_iterations=args.iterations, log=_log, loss=loss)
+        start = _per_day_starts(scenes, strikes, params, per_day, weights, mapper)
+        fit = ident.identify(model, start, max_iterations=args.iterations, log=_log, loss=loss)
         folds, cv_method = None, ''
         if args.cross_validate and args.cv_iterations == 0:
             folds = ident.cross_validate_one_step(model, fit, log=_log)
@@ -203,6 +205,22 @@ def run_identify(args) -> int:
     else:
         print(_identify_text(report))
     return 0
+
+
+def _per_day_starts(scenes, strikes, params, per_day, weights, mapper):
+    """Start values: the scenes' for the robot's parameters; for each day's own parameters,
+    that day's fit with the scene held (mantis day-state), so that the joint fit starts near
+    the days' states rather than at the scene's value for all of them."""
+    if not per_day:
+        return None
+    from mantis_sim.studies import day_state as ds
+    own = {}
+    for param in per_day:
+        _log(f'identify: each day\'s {param.label} from its strikes, to start from')
+        for state in ds.DayStateFit(scenes, strikes, param, weights, mapper).fit(3, log=_log):
+            own[(param.key, state.group, state.day)] = state.value
+    return [own.get((p.key, p.groups[0], p.day)) if p.day is not None
+            else ident.default_value(scenes, p) for p in params]
 
 
 def _identify_report(fit, folds, written) -> dict:

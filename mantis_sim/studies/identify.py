@@ -367,7 +367,7 @@ def identify(model: StrikeModel, initial: Optional[Sequence[float]] = None,
     lower = np.array([p.lower for p in params])
     upper = np.array([p.upper for p in params])
     x0 = np.array(initial if initial is not None else
-                  [_default_value(model.scenes, p) for p in params], dtype=float)
+                  [default_value(model.scenes, p) for p in params], dtype=float)
     x0 = np.clip(x0, lower, upper)
     started = time.monotonic()
     cache: dict[bytes, np.ndarray] = {}
@@ -431,7 +431,8 @@ def _uncertainty(jacobian: np.ndarray, residual: np.ndarray, n: int):
     return std, correlation
 
 
-def _default_value(scenes: dict[str, Scene], p: FreeParameter) -> float:
+def default_value(scenes: dict[str, Scene], p: FreeParameter) -> float:
+    """Where a fit of ``p`` starts: the value the model uses in the first group it applies to."""
     group = next(g for g in sorted(scenes) if p.applies_to(g))
     return scene_value(scenes[group], p.key)
 
@@ -492,7 +493,7 @@ def _without_the_day(model: StrikeModel, values: np.ndarray, day: str) -> np.nda
     values = values.copy()
     for i, p in enumerate(model.params):
         if p.day == day:
-            values[i] = _default_value(model.scenes, p)
+            values[i] = default_value(model.scenes, p)
     return values
 
 
@@ -532,7 +533,7 @@ def cross_validate(model: StrikeModel, fitted: np.ndarray, max_iterations: int =
 
 __all__ = ['CORRELATION_WARNING', 'FoldResult', 'FreeParameter', 'Identification',
            'IdentificationError', 'Loss', 'StrikeModel', 'Weights', 'cross_validate',
-           'cross_validate_one_step', 'identify', 'scene_value', 'simulate_task',
+           'cross_validate_one_step', 'default_value', 'identify', 'scene_value', 'simulate_task',
            'parse_free_parameter', 'per_day_parameters', 'strike_residuals',
            'values_for_strike']
 
@@ -613,7 +614,7 @@ def calibrated_scene(base: dict, fit: Identification, group: str,
 
 
 STAGE_KEYS = ('date', 'strikes', 'weights', 'loss', 'cost', 'fitted_errors',
-              'cross_validated_errors', 'cross_validation', 'optimiser')
+              'cross_validated_errors', 'cross_validation', 'optimiser', 'day_states')
 
 
 def _same_parameter(label: str, other: str) -> bool:

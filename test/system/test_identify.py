@@ -251,15 +251,16 @@ def test_identify_writes_a_calibrated_scene_with_its_provenance(tmp_path, capsys
     assert 'water_23mm' in provenance['cross_validated_errors']
     assert provenance['weights']['series'] == 0.2 and provenance['weights']['tip_speed'] == 1
     assert provenance['loss'] == 'huber:0.05'
-    # the shipped scene was fitted in two stages; what this fit held stays on record as theirs
+    # the shipped scene was fitted in three stages; what this fit held stays on record as theirs
     fitted = provenance['parameters']
     assert 'held_from_stage' not in fitted['arm.blade_drag_broadside']
     assert fitted['tendon.stiffness_N_per_mm']['held_from_stage'] == 1
-    assert fitted['hinge.kinetic_friction_ratio']['held_from_stage'] == 2
+    assert fitted['hinge.kinetic_friction_ratio']['held_from_stage'] == 3
     stages = provenance['earlier_stages']
-    assert [s['stage'] for s in stages] == [1, 2]
+    assert [s['stage'] for s in stages] == [1, 2, 3]
     assert stages[1]['parameters'] == ['hinge.kinetic_friction_ratio']
     assert stages[1]['weights']['series'] == 0.0 and stages[1]['loss'] == 'soft_l1:0.01'
+    assert 'damping.arm_Nmm_ms_per_rad' in stages[2]['parameters']
     doc = yaml.safe_load((out / 'water_23mm.yaml').read_text())
     assert doc['name'] == 'water_23mm' and doc['medium']['name'] == 'water'
 
@@ -355,7 +356,7 @@ def test_a_fit_of_a_key_the_scene_leaves_unset_starts_from_what_the_model_uses()
     assert scene.hinge.kinetic_friction_lever_mm is None
     param = ident.parse_free_parameter('hinge.kinetic_friction_lever_mm=0:0.05',
                                        {'air_23mm': scene})
-    assert ident._default_value({'air_23mm': scene}, param) == kinetic_lever(scene)
+    assert ident.default_value({'air_23mm': scene}, param) == kinetic_lever(scene)
     with pytest.raises(ident.IdentificationError, match='integration.t_end_s is unset'):
         ident.scene_value(scene, 'integration.t_end_s')
 
