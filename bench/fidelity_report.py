@@ -480,7 +480,7 @@ which the fit does not see):
 energies alone, the latched angle follows the arm angle tracked at overcentering:
 {latch_follows}. A day's own latched angle predicts the energy of its left-out strikes far
 better than a day's own hold (air at 23 mm: {latched_energy}, against {held_energy} with the
-hold), their tip speed about as well ({latched_speed}, against {held_speed}). A day's hold
+hold), and their tip speed {latched_speed}, against {held_speed} with the hold. A day's hold
 cannot reach the days that store least: with no hold the model's arm leaves at
 overcentering, and on {floor} the real arm sits further out on the latch, so it overcentres
 earlier. The recorded contact angle does not carry this (below): the shipped scenes, judged
