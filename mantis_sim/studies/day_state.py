@@ -28,7 +28,7 @@ import numpy as np
 from mantis_sim.model import kinetic_lever
 from mantis_sim.scene import Scene
 
-from .fidelity import SimulatedStrike
+from .fidelity import SimulatedStrike, error_rows, group_summary
 from .identify import FreeParameter, Weights, scene_value, simulate_task, strike_residuals
 from .strikes import RealStrike
 
@@ -195,17 +195,16 @@ def _gauss_newton(value: float, r: np.ndarray, j: np.ndarray, param: FreeParamet
 def left_out_summary(left_out: list[LeftOut]) -> dict[str, dict]:
     """Per group: strikes predicted, and the median |error| of tip speed and spring energy with
     the scene's value (`shared`) and with the day's own (`own_day`)."""
+    strikes = [x.strike for x in left_out]
+    rows = {which: error_rows(strikes, [getattr(x, which) for x in left_out])
+            for which in ('shared', 'own_day')}
     out = {}
-    for group in sorted({x.strike.group for x in left_out}):
-        rows = [x for x in left_out if x.strike.group == group]
-        entry = {'strikes': len(rows)}
-        for label, attr in (('tip_speed', 'peak_tip_speed_mps'),
-                            ('spring_energy', 'spring_energy_mJ')):
-            for which in ('shared', 'own_day'):
-                errors = [getattr(getattr(x, which), attr) / getattr(x.strike, attr) - 1.0
-                          for x in rows if getattr(x.strike, attr)]
-                errors = np.abs([e for e in errors if math.isfinite(e)])
-                entry[f'{label}_{which}'] = float(np.median(errors)) if errors.size else math.nan
+    for group in sorted({s.group for s in strikes}):
+        entry = {'strikes': sum(s.group == group for s in strikes)}
+        for label, key in (('tip_speed', 'peak_tip_speed_mps'),
+                           ('spring_energy', 'spring_energy_mJ')):
+            for which, table in rows.items():
+                entry[f'{label}_{which}'] = group_summary(table, key)[group]['median_abs_error']
         out[group] = entry
     return out
 

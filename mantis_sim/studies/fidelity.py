@@ -54,15 +54,17 @@ class SimulatedStrike:
     wall_s: float = 0.0
 
 
-def simulate_strike(scene: Scene, strike: RealStrike, series: bool = True) -> SimulatedStrike:
-    """One strike at its own conditions (module docstring). Never raises for a strike the model
+def simulate_strike(scene: Scene, strike: RealStrike, series: bool = True,
+                    values: Optional[dict] = None) -> SimulatedStrike:
+    """One strike at its own conditions (module docstring), with ``values`` ({key: value}, as a
+    fit or a day's state sets them) set together with them. Never raises for a strike the model
     cannot simulate: its status says why."""
-    overrides = strike_overrides(strike)
+    overrides = strike_overrides(strike) + [f'{k}={v!r}' for k, v in (values or {}).items()]
     if series:      # simulate through the whole window that is compared
         overrides.append(f'integration.post_peak_ms={SERIES_WINDOW_S[strike.medium][1] * 1e3!r}')
     try:
         at_conditions = scene.with_overrides(overrides)
-    except ParameterError as exc:   # e.g. a day's latch offset this strike's angle cannot take
+    except ParameterError as exc:   # e.g. a latch offset this strike's angle cannot take
         return SimulatedStrike(strike.trial, 'failed', f'at its conditions: {exc}')
     try:
         result = simulate(at_conditions, dense=series)

@@ -34,10 +34,10 @@ import numpy as np
 
 from mantis_sim.errors import InputError
 from mantis_sim.model import kinetic_lever
-from mantis_sim.parameters import SECTIONS, ParameterError
+from mantis_sim.parameters import SECTIONS
 from mantis_sim.scene import Scene
 
-from .fidelity import SimulatedStrike, real_on_grid, simulate_strike, strike_overrides
+from .fidelity import SimulatedStrike, real_on_grid, simulate_strike
 from .strikes import RealStrike
 
 CORRELATION_WARNING = 0.9
@@ -129,30 +129,24 @@ class Loss:
 
     def cost(self, residual: np.ndarray) -> float:
         """What the fit minimises: 0.5 scale^2 sum(rho(z)) (0.5 sum(r^2) when linear)."""
-        z = (residual / self.scale) ** 2
-        if self.name == 'soft_l1':
-            rho = 2.0 * (np.sqrt(1.0 + z) - 1.0)
-        elif self.name == 'huber':
-            rho = np.where(z <= 1.0, z, 2.0 * np.sqrt(z) - 1.0)
-        elif self.name == 'cauchy':
-            rho = np.log1p(z)
-        else:
-            rho = z
-        return float(0.5 * self.scale ** 2 * np.sum(rho))
+        rho, _ = _RHO[self.name]
+        return float(0.5 * self.scale ** 2 * np.sum(rho((residual / self.scale) ** 2)))
 
     def row_weights(self, residual: np.ndarray) -> np.ndarray:
         """sqrt(rho'(z)) per residual: the weights of the least-squares problem that has the
         same step at this point (iteratively reweighted least squares)."""
-        z = (residual / self.scale) ** 2
-        if self.name == 'soft_l1':
-            slope = 1.0 / np.sqrt(1.0 + z)
-        elif self.name == 'huber':
-            slope = np.where(z <= 1.0, 1.0, 1.0 / np.sqrt(np.maximum(z, 1.0)))
-        elif self.name == 'cauchy':
-            slope = 1.0 / (1.0 + z)
-        else:
-            slope = np.ones_like(z)
-        return np.sqrt(slope)
+        _, slope = _RHO[self.name]
+        return np.sqrt(slope((residual / self.scale) ** 2))
+
+
+# scipy.optimize.least_squares' losses: rho(z) and rho'(z), z = (residual / scale)^2
+_RHO = {
+    'linear': (lambda z: z, np.ones_like),
+    'soft_l1': (lambda z: 2.0 * (np.sqrt(1.0 + z) - 1.0), lambda z: 1.0 / np.sqrt(1.0 + z)),
+    'huber': (lambda z: np.where(z <= 1.0, z, 2.0 * np.sqrt(z) - 1.0),
+              lambda z: np.where(z <= 1.0, 1.0, 1.0 / np.sqrt(np.maximum(z, 1.0)))),
+    'cauchy': (np.log1p, lambda z: 1.0 / (1.0 + z)),
+}
 
 
 @dataclass(frozen=True)
@@ -308,17 +302,11 @@ def strike_residuals(strike: RealStrike, sim: SimulatedStrike, weights: Weights)
 
 
 def simulate_task(task) -> SimulatedStrike:
-    """(scene, strike, with its series?, {key: value}) -> the strike simulated at its own
-    conditions with those values, all set together (a latch offset is checked against the
-    strike's own contact angle); values its conditions cannot take make a failed strike with
-    the reason. A task for the workers."""
+    """(scene, strike, with its series?, {key: value}) -> simulate_strike: the strike at its
+    own conditions with those values set together (a latch offset is checked against the
+    strike's own contact angle). A task for the workers."""
     scene, strike, series, values = task
-    assignments = strike_overrides(strike) + [f'{k}={v!r}' for k, v in values.items()]
-    try:
-        at_conditions = scene.with_overrides(assignments)
-    except ParameterError as exc:
-        return SimulatedStrike(strike.trial, 'failed', f'at its conditions: {exc}')
-    return simulate_strike(at_conditions, strike, series=series)
+    return simulate_strike(scene, strike, series=series, values=values)
 
 
 class StrikeModel:
