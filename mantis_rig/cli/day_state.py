@@ -24,7 +24,7 @@ from mantis_sim.studies import identify as ident
 from mantis_sim.studies.parallel import ClusterMap
 
 from .identify import _load_strikes, _log, _scenes, _strike_arguments
-from .options import json_safe
+from .options import check_out_folder, json_safe
 
 SAFE_DAY = re.compile(r'[A-Za-z0-9_.-]+')
 
@@ -64,8 +64,7 @@ def run_day_state(args) -> int:
     weights = ident.Weights.parse(args.weight)
     if args.iterations < 1:
         raise InputError(f'--iterations {args.iterations}: must be >= 1')
-    if args.out is not None and args.out.exists() and not args.out.is_dir():
-        raise InputError(f'--out {args.out}: exists and is not a folder')
+    check_out_folder(args.out)
     chosen = [s for s in strikes if param.applies_to(s.group)]
     undated = [s.trial for s in chosen if not s.recording_day]
     if undated or not chosen:

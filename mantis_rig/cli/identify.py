@@ -30,7 +30,7 @@ from mantis_sim.studies.strikes import (
     read_strikes,
 )
 
-from .options import add_cluster_options, json_safe
+from .options import add_cluster_options, check_out_folder, json_safe
 
 
 def add_commands(commands) -> None:
@@ -171,8 +171,7 @@ def run_identify(args) -> int:
         raise InputError(f'--iterations {args.iterations}: must be >= 1')
     if args.cv_iterations < 0:
         raise InputError(f'--cv-iterations {args.cv_iterations}: must be >= 0')
-    if args.out.exists() and not args.out.is_dir():
-        raise InputError(f'--out {args.out}: exists and is not a folder')
+    check_out_folder(args.out)
     with ClusterMap(args.scheduler, args.workers, progress=not args.json) as mapper:
         _log(f'identify: {len(strikes)} strikes ({", ".join(sorted(scenes))}), '
              f'{len(params)} parameters, on {mapper.where} ({mapper.worker_count} worker(s))')
@@ -283,8 +282,7 @@ def run_compare(args) -> int:
     if no_motion:
         raise InputError(f'--figure {", ".join(no_motion)}: no recorded motion (give '
                          f'--processed or --export for it)')
-    if args.out.exists() and not args.out.is_dir():
-        raise InputError(f'--out {args.out}: exists and is not a folder')
+    check_out_folder(args.out)
     with ClusterMap(args.scheduler, args.workers, progress=not args.json) as mapper:
         model = ident.StrikeModel(scenes, strikes, [], ident.Weights(), mapper)
         simulated = model.simulate([[]])[0]

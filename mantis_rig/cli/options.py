@@ -6,9 +6,18 @@ import argparse
 import math
 import sys
 
+from ..errors import InputError
+
 
 def err(command, text):
     print(f'mantis {command}: {text}', file=sys.stderr)
+
+
+def check_out_folder(path) -> None:
+    """--out names a folder to write into (made if missing): refuse a file there, before any
+    work."""
+    if path is not None and path.exists() and not path.is_dir():
+        raise InputError(f'--out {path}: exists and is not a folder')
 
 
 def json_safe(value):

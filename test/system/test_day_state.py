@@ -24,11 +24,10 @@ def _serial(function, items):
     return [function(item) for item in items]
 
 
-def _strikes_of_days(base):
-    """Strikes 'measured' on the model with each day's own hold, the braking the scene's."""
+def _strikes_of_days(truths: dict):
+    """Strikes 'measured' on the model, two a day, each day on its own scene (day -> scene)."""
     strikes = []
-    for day, hold in HOLDS_MM.items():
-        truth = ds.day_scene(base, ds.HOLD_KEY, hold)
+    for day, truth in truths.items():
         for k, (pull, angle) in enumerate(((2.3, 3.0), (1.0, 3.5))):
             strike = RealStrike(f'{day}_{k}', 'air', 23.0, angle, pull, day)
             sim = fidelity.simulate_strike(truth, strike, series=False)
@@ -44,7 +43,8 @@ def test_each_day_s_hold_is_recovered_and_predicts_its_other_strikes():
         'effects=[joint_damping, hinge_stiffness, fluid_drag, tendon_slack, '
         'contact_restitution, pivot_friction]', 'hinge.friction_lever_mm=0.07',
         'hinge.kinetic_friction_ratio=0.3'])
-    strikes = _strikes_of_days(base)
+    strikes = _strikes_of_days({day: ds.day_scene(base, ds.HOLD_KEY, hold)
+                                for day, hold in HOLDS_MM.items()})
     param = ident.parse_free_parameter('hinge.friction_lever_mm=0:0.5', {'air_23mm': base})
     states = ds.DayStateFit({'air_23mm': base}, strikes, param, ident.Weights(), _serial)
     fitted = {s.day: s for s in states.fit()}
@@ -121,15 +121,8 @@ def test_an_arm_latched_outside_its_range_is_refused_and_a_strike_there_fails_wi
 @pytest.mark.slow
 def test_each_day_s_latched_angle_is_recovered_from_its_peaks():
     base = load_scene('air_23mm')
-    strikes = []
-    for day, offset in (('d1', -1.0), ('d2', 4.0)):
-        truth = base.with_values({ds.LATCH_KEY: offset})
-        for k, (pull, angle) in enumerate(((2.3, 3.0), (1.0, 3.5))):
-            strike = RealStrike(f'{day}_{k}', 'air', 23.0, angle, pull, day)
-            sim = fidelity.simulate_strike(truth, strike, series=False)
-            strikes.append(RealStrike(strike.trial, 'air', 23.0, angle, pull, day,
-                                      peak_tip_speed_mps=sim.peak_tip_speed_mps,
-                                      spring_energy_mJ=sim.spring_energy_mJ))
+    strikes = _strikes_of_days({day: base.with_values({ds.LATCH_KEY: offset})
+                                for day, offset in (('d1', -1.0), ('d2', 4.0))})
     param = ident.parse_free_parameter(ds.DEFAULT_DAY_KEY, {'air_23mm': base})
     fitted = {s.day: s.value for s in ds.DayStateFit({'air_23mm': base}, strikes, param,
                                                      ident.Weights(), _serial).fit()}
