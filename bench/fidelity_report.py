@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
+import functools
 import gzip
 import math
 from pathlib import Path
@@ -145,8 +146,7 @@ def tracked_arm_at_overcentering(data: Path) -> dict[str, float]:
     with open(data / 'authors_summary_train.csv', newline='', encoding='utf-8') as f:
         for r in csv.DictReader(f):
             if 'recording star' not in r['notes']:
-                record = data / 'authors_processed' / f'{r["trial"]}_data.csv.gz'
-                out[r['trial']] = _angles_at(record, float(r['t_oc_s']))[1]
+                out[r['trial']] = _angles_at(data, r['trial'], float(r['t_oc_s']))[1]
     return out
 
 
@@ -229,10 +229,18 @@ def _air_23mm_rows(table: Path) -> list[dict]:
                 and float(r['d_t_mm']) == 23.0 and 'recording star' not in r['notes']]
 
 
-def _angles_at(record: Path, t_s: float) -> tuple[float, float]:
+@functools.cache
+def _record(data: Path, trial: str) -> np.ndarray:
+    """A processed record as published (time s, theta1, theta2 rad, their rates, force N), read
+    once for all the findings that look at it."""
+    path = data / 'authors_processed' / f'{trial}_data.csv.gz'
+    return np.loadtxt(gzip.open(path, 'rt'), delimiter=',', ndmin=2)
+
+
+def _angles_at(data: Path, trial: str, t_s: float) -> tuple[float, float]:
     """(theta1, theta2) in degrees at time t_s (the record's time) of a processed record."""
-    data = np.loadtxt(gzip.open(record, 'rt'), delimiter=',', ndmin=2)
-    return tuple(float(np.degrees(np.interp(t_s, data[:, 0], data[:, k]))) for k in (1, 2))
+    record = _record(data, trial)
+    return tuple(float(np.degrees(np.interp(t_s, record[:, 0], record[:, k]))) for k in (1, 2))
 
 
 def contact_angle_finding(data: Path, scene, strikes, mapper) -> str:
@@ -240,8 +248,7 @@ def contact_angle_finding(data: Path, scene, strikes, mapper) -> str:
     the body's angle at the lab's overcentering), within days and across them; and the
     identified scene with its latched arm angle set by the within-day relation."""
     rows = _air_23mm_rows(data / 'authors_summary_train.csv')
-    angles = [_angles_at(data / 'authors_processed' / f'{r["trial"]}_data.csv.gz',
-                         float(r['t_oc_s'])) for r in rows]
+    angles = [_angles_at(data, r['trial'], float(r['t_oc_s'])) for r in rows]
     phi = [float(r['contact_angle_deg']) for r in rows]
     days = [r['recording_day'] for r in rows]
     arm = fidelity.fit_slope(phi, [a[1] for a in angles], days=days)
@@ -274,39 +281,26 @@ def contact_angle_finding(data: Path, scene, strikes, mapper) -> str:
             f'recorded angle predicts no arm angle: not shipped')
 
 
-def _within_days(columns: list, y, days: list[str]) -> list[tuple[float, float]]:
-    """Least squares of y on the columns with one intercept per day: (coefficient, standard
-    error) of each column."""
-    design = np.column_stack([np.asarray(c, float) for c in columns] + [
-        np.array([d == day for d in days], float) for day in sorted(set(days))])
-    y = np.asarray(y, float)
-    coef, _, rank, _ = np.linalg.lstsq(design, y, rcond=None)
-    residual = y - design @ coef
-    covariance = residual @ residual / (len(y) - rank) * np.linalg.pinv(design.T @ design)
-    return [(float(coef[i]), float(np.sqrt(covariance[i, i]))) for i in range(len(columns))]
-
-
 def tendon_force_finding(data: Path) -> str:
     """Air at 23 mm, within days: the load cell's force just before phase IV (median over 2 to
     20 ms before it) against the pull speed, and the tip speed against it beyond the energy."""
     rows = _air_23mm_rows(data / 'authors_summary_train.csv')
     force = []
     for r in rows:
-        record = np.loadtxt(gzip.open(data / 'authors_processed' / f'{r["trial"]}_data.csv.gz',
-                                      'rt'), delimiter=',', ndmin=2)
+        record = _record(data, r['trial'])
         t_iv = float(r['t_z1_s'])
         before = (record[:, 0] > t_iv - 0.020) & (record[:, 0] < t_iv - 0.002)
         force.append(float(np.median(record[before, 5])))
     days = [r['recording_day'] for r in rows]
     pull = [float(r['pull_measured_mm_s']) for r in rows]
-    (per_pull,) = _within_days([pull], force, days)
-    _, per_newton = _within_days([[float(r['PE_max_mJ']) for r in rows], force],
-                                 [float(r['v_max_mps']) for r in rows], days)
+    per_pull = fidelity.fit_slope(pull, force, days)
+    _, per_newton = fidelity.fit_slopes([[float(r['PE_max_mJ']) for r in rows], force],
+                                        [float(r['v_max_mps']) for r in rows], days)
     return (f'Nor does the tendon force just before the strike follow the pull speed within days '
-            f'({per_pull[0]:+.2f} +- {per_pull[1]:.2f} N per mm/s, air 23 mm), though the strike '
-            f'is faster by {per_newton[0]:+.1f} +- {per_newton[1]:.1f} m/s per N of it beyond what '
-            f'the spring energy gives: energy in a compliant tendon would carry that, and the '
-            f'fit wants a stiff one (below)')
+            f'({per_pull.value:+.2f} +- {per_pull.std_error:.2f} N per mm/s, air 23 mm), though '
+            f'the strike is faster by {per_newton.value:+.1f} +- {per_newton.std_error:.1f} m/s '
+            f'per N of it beyond what the spring energy gives: energy in a compliant tendon '
+            f'would carry that, and the fit wants a stiff one (below)')
 
 
 def lever_sweep_finding(scene) -> str:
@@ -541,7 +535,7 @@ and simulated:
   the strike fit worse. The shipped scenes' tip speed: water {vwater}, air at 23 mm {v23}.
   Refitting all nine parameters to the peaks alone drove the 23 mm friction lever to zero and
   made that group worse (tip speed 6.2 %, spring energy 12.6 %): the shipped scenes are the
-  two-stage fit.
+  staged fit above.
 - **The strike's time course.** The real strike takes longer from the start of phase IV to the
   peak than the simulated one, and the real body turns back less (0.17-0.26 rad against about
   0.3); the series enter the fit with a low weight (`mantis_sim/studies/identify.py`, Weights).
@@ -557,10 +551,11 @@ and simulated:
   model a day's larger friction lever holds longer and stores more but also brakes the swing
   more: on the 23 mm scene at 3 degrees and 2.3 mm/s, {lever_sweep}. So a day's own lever
   with one friction improves that day's energy ({day_energy} at 23 mm, above) and worsens its
-  tip speed ({day_speed}); moving the hold alone, the braking held, improves both (energy
-  {held_energy}, tip speed {held_speed}), the energy little, since the days that store least
-  want less than no hold (above). The data across days do not fix the braking at 23 mm on their own:
-  fitted per guide (stage 2 with a ratio per group, not shipped), mu_k/mu_s came out
+  tip speed ({day_speed}); moving the hold alone, the braking held, does less harm to the tip
+  speed ({held_speed}) and improves the energy little ({held_energy}), since the days that
+  store least want less than no hold (above). The data across days do not fix the braking at
+  23 mm on their own: fitted per guide (stage 2 with a ratio per group, not shipped), mu_k/mu_s
+  came out
   0.90 +- 0.29 at 23 mm and 0.75 +- 0.11 at 19 mm. One braking lever for both guides, as one
   pin would give (`hinge.kinetic_friction_lever_mm` fitted alone from stage 1, the robust
   loss), is refused: it cannot exceed the 23 mm hold of 0.06 mm, and there the 19 mm strikes'

@@ -9,6 +9,7 @@ with their real counterparts: per strike, per group, and the effects a design st
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 import math
 from typing import Optional
@@ -153,23 +154,32 @@ class Slope:
 def fit_slope(x: np.ndarray, y: np.ndarray, days: Optional[list[str]] = None) -> Slope:
     """Least-squares slope of y on x, with one intercept per recording day when ``days`` is
     given (the effect within days), and its standard error."""
-    x, y = np.asarray(x, float), np.asarray(y, float)
-    keep = np.isfinite(x) & np.isfinite(y)
-    x, y = x[keep], y[keep]
+    return fit_slopes([x], y, days)[0]
+
+
+def fit_slopes(xs: Sequence, y: np.ndarray, days: Optional[list[str]] = None) -> list[Slope]:
+    """fit_slope of y on several x at once: each one's slope with the others held (and one
+    intercept per recording day when ``days`` is given). Strikes with any value missing are
+    left out; where the data cannot separate the columns every slope is NaN."""
+    xs = [np.asarray(x, float) for x in xs]
+    y = np.asarray(y, float)
+    keep = np.isfinite(y) & np.logical_and.reduce([np.isfinite(x) for x in xs])
+    xs, y = [x[keep] for x in xs], y[keep]
     if days is None:
-        columns = [np.ones_like(x)]
+        columns = [np.ones_like(y)]
     else:
         kept_days = [d for d, k in zip(days, keep) if k]
         columns = [np.array([d == day for d in kept_days], float)
                    for day in sorted(set(kept_days))]
-    design = np.column_stack([x, *columns])
+    design = np.column_stack([*xs, *columns])
     coef, _, rank, _ = np.linalg.lstsq(design, y, rcond=None)
     dof = len(y) - rank
     if dof <= 0 or rank < design.shape[1]:
-        return Slope(math.nan, math.nan, len(y))
+        return [Slope(math.nan, math.nan, len(y)) for _ in xs]
     residual = y - design @ coef
     covariance = residual @ residual / dof * np.linalg.pinv(design.T @ design)
-    return Slope(float(coef[0]), float(math.sqrt(covariance[0, 0])), len(y))
+    return [Slope(float(coef[i]), float(math.sqrt(covariance[i, i])), len(y))
+            for i in range(len(xs))]
 
 
 # The effects a design study varies (issue 24): (name, y key, x key, rows kept, within days?)
@@ -204,5 +214,5 @@ def effect_slopes(rows: list[dict]) -> list[dict]:
 
 
 __all__ = ['COMPARED', 'EFFECT_SLOPES', 'SimulatedStrike', 'Slope',
-           'effect_slopes', 'error_rows', 'fit_slope', 'group_summary', 'real_on_grid',
-           'series_grid', 'simulate_strike', 'strike_overrides']
+           'effect_slopes', 'error_rows', 'fit_slope', 'fit_slopes', 'group_summary',
+           'real_on_grid', 'series_grid', 'simulate_strike', 'strike_overrides']
