@@ -313,8 +313,8 @@ def typical_day_finding(scenes, strikes, mapper, rows_now) -> str:
             f'|error| of the tip speed goes {errors(rows_now, "peak_tip_speed_mps")} -> '
             f'{errors(rows, "peak_tip_speed_mps")} and of the spring energy '
             f'{errors(rows_now, "spring_energy_mJ")} -> {errors(rows, "spring_energy_mJ")}'
-            + (f', and {failed} strikes can no longer be simulated (their contact angle '
-               f'cannot take the offset)' if failed else '')
+            + (f', and {failed} strike{"s" if failed > 1 else ""} can no longer be simulated '
+               f'(the contact angle cannot take the offset)' if failed else '')
             + '. At offset 0 the 23 mm scene sits on the cluster that holds most strikes, '
               'which the median errors reward; the least-squares slopes weigh the other '
               'cluster too. The shipped scenes keep 0')
@@ -539,8 +539,8 @@ The standard errors here are the 32 training strikes'. Over all 55 strikes with 
 (issue 24) the real effects are {against_all}.
 How many standard errors from zero the training strikes put each real effect: {identifiable}.
 An effect the training set holds within about one standard error of zero cannot be identified
-from it: no term was fitted to carry the pull-speed effect or the contact angle's effect on the
-tip speed.
+from it (here the three effects on the tip speed): what the model gives for those comes from its
+physics, not from a term fitted to carry them.
 
 ## Strikes the model did not simulate to a strike
 {not_struck}
