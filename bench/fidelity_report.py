@@ -259,6 +259,13 @@ def _model_seats(scene, offsets=(-3.0, 0.0, 3.0, 6.0, 9.0)) -> dict[str, np.ndar
     return {k: np.array(v) for k, v in out.items()}
 
 
+def _within_std_errors(arm, energy, days, model) -> float:
+    """How far the model's energy per degree of the seat lies from the real within-day one."""
+    real = fidelity.fit_slope(arm, energy, days)
+    return abs(fidelity.fit_slope(model['arm_oc'], model['energy']).value - real.value) \
+        / real.std_error
+
+
 def seat_table(data: Path, scene, reference) -> tuple[list[str], str]:
     """Air at 23 mm: how the strike follows where the arm sits at overcentering, real (the
     authors' processed angles at their t_oc, within days and across them) and in the model (its
@@ -292,7 +299,8 @@ def seat_table(data: Path, scene, reference) -> tuple[list[str], str]:
     _, phi_beyond = fidelity.fit_slopes([energy, phi], tip, days)
     _, pull_beyond = fidelity.fit_slopes([energy, pull], tip, days)
     text = (f'The arm\'s angle at overcentering explains {100 * explained:.0f} % of the spring '
-            f'energy\'s variance over these {len(rows)} strikes, within days as across them. '
+            f'energy\'s variance over these {len(rows)} strikes, with about the same slope '
+            f'within days as across them. '
             f'Within days the seat does not follow the pull speed ({seat_pull.value:+.2f} +- '
             f'{seat_pull.std_error:.2f} degrees per mm/s) and goes against the recorded contact '
             f'angle ({seat_phi.value:+.1f} +- {seat_phi.std_error:.1f} degrees per degree, which '
@@ -301,9 +309,11 @@ def seat_table(data: Path, scene, reference) -> tuple[list[str], str]:
             f'{phi_beyond.std_error:.2f} m/s per degree) nor the pull speed '
             f'({pull_beyond.value:+.2f} +- {pull_beyond.std_error:.2f} m/s per mm/s). So the '
             f'strikes of one day differ mostly by where the arm sat, which the recorded '
-            f'conditions do not fix, and given the seat the model stores and strikes as the '
-            f'robot does. The body\'s angle at overcentering follows the arm\'s less steeply '
-            f'in the identified scene than in the lab\'s processing; the reference scene, '
+            f'conditions do not fix. Given the seat, the model\'s tip speed per mJ is the '
+            f'robot\'s, and its energy per degree is '
+            f'{_within_std_errors(arm, energy, days, model):.1f} standard errors from the '
+            f'within-day value (the across-day value is steeper). The body\'s angle at '
+            f'overcentering follows the arm\'s less steeply in the identified scene than in the lab\'s processing; the reference scene, '
             f'rigid tendon and no pivot friction, gives '
             f'{fidelity.fit_slope(published["arm_oc"], published["body_oc"]).value:+.2f} '
             f'degrees per degree (not explained here)')
