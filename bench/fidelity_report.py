@@ -313,8 +313,9 @@ def seat_table(data: Path, scene, reference) -> tuple[list[str], str]:
             f'robot\'s, and its energy per degree is '
             f'{_within_std_errors(arm, energy, days, model):.1f} standard errors from the '
             f'within-day value (the across-day value is steeper). The body\'s angle at '
-            f'overcentering follows the arm\'s less steeply in the identified scene than in the lab\'s processing; the reference scene, '
-            f'rigid tendon and no pivot friction, gives '
+            f'overcentering follows the arm\'s less steeply in the identified scene than in '
+            f'the lab\'s processing; the reference scene, rigid tendon and no pivot friction, '
+            f'gives '
             f'{fidelity.fit_slope(published["arm_oc"], published["body_oc"]).value:+.2f} '
             f'degrees per degree (not explained here)')
     return lines, text
