@@ -47,8 +47,8 @@ def apct(x: float) -> str:
     return f'{100 * x:.1f} %' if x == x else 'n/a'
 
 
-def simulate_all(scenes, strikes, mapper):
-    model = ident.StrikeModel(scenes, strikes, [], ident.Weights(), mapper)
+def simulate_all(scenes, strikes, mapper, at_seat=False):
+    model = ident.StrikeModel(scenes, strikes, [], ident.Weights(), mapper, at_seat=at_seat)
     return model.simulate([[]])[0]
 
 
@@ -321,32 +321,42 @@ def seat_table(data: Path, scene, reference) -> tuple[list[str], str]:
     return lines, text
 
 
-def at_tracked_seats(data: Path, scene, strikes, rows_now) -> str:
-    """The identified 23 mm scene with each strike's arm seated where its tracks show it at the
-    lab's overcentering (no fit), against the scene at the recorded contact angle."""
-    seats = {r['trial']: _angles_at(data, r['trial'], float(r['t_oc_s']))[1]
-             for r in _air_23mm_rows(data / 'authors_summary_train.csv')}
-    chosen = [s for s in strikes if s.trial in seats]
-    seated = [fidelity.simulate_strike(scene, s, series=False, values={
-        day_state.LATCH_KEY: seats[s.trial] - s.contact_angle_deg}) for s in chosen]
-    rows_seated = fidelity.error_rows(chosen, seated)
-    rows_recorded = [r for r in rows_now if r['trial'] in seats]
+def _spread(strikes, attribute: str) -> str:
+    values = [getattr(s, attribute) for s in strikes]
+    return f'{min(values):.1f} to {max(values):.1f}'
 
-    def errors(rows):
-        return ' and '.join(apct(fidelity.group_summary(rows, key)['air_23mm']['median_abs_error'])
+
+def at_tracked_seats(scenes, strikes, mapper, rows_now) -> str:
+    """The identified scenes with each strike's arm seated where its tracks show it at the
+    lab's overcentering (`mantis compare --at-seat`; no fit), against them at the recorded
+    contact angle."""
+    chosen = [s for s in strikes if s.seat_deg is not None]
+    rows_seated = fidelity.error_rows(chosen, simulate_all(scenes, chosen, mapper, at_seat=True))
+    seated_trials = {s.trial for s in chosen}
+    rows_recorded = [r for r in rows_now if r['trial'] in seated_trials]
+
+    def errors(rows, group):
+        return ' and '.join(apct(fidelity.group_summary(rows, key)[group]['median_abs_error'])
                             for key in ('peak_tip_speed_mps', 'spring_energy_mJ'))
     failed = sum(r['status'] != 'strike' for r in rows_seated)
+    outward = '; '.join(
+        f'{g}: recorded {_spread(of_group, "contact_angle_deg")} degrees, tracked '
+        f'{_spread(of_group, "seat_deg")}' for g in ('air_19mm', 'water_23mm')
+        for of_group in [[s for s in chosen if s.group == g]])
+    per_group = '; '.join(
+        f'{g} ({sum(s.group == g for s in chosen)} strikes) {errors(rows_seated, g)}, against '
+        f'{errors(rows_recorded, g)} at the recorded contact angle' for g in GROUPS)
     return (f'Simulated with each strike\'s arm seated where its tracks show it at the lab\'s '
-            f'overcentering (`geometry.latch_offset_deg` = that angle - the recorded contact '
-            f'angle; nothing fitted), the identified air_23mm scene\'s median |error| in tip '
-            f'speed and spring energy is {errors(rows_seated)} over these {len(chosen)} strikes, '
-            f'against {errors(rows_recorded)} at the recorded contact angle'
+            f'overcentering (`mantis compare --at-seat`: `geometry.latch_offset_deg` = that '
+            f'angle - the recorded contact angle; nothing fitted), the identified scenes\' '
+            f'median |error| in tip speed and spring energy is: {per_group}'
             + (f' ({failed} could not be seated)' if failed else '')
-            + '. The other groups\' scenes were identified with the arm at the recorded angle, '
-              'their pivot\'s hold standing in for the seat, so they are not compared so. '
-              'Where a trial records where the arm sits, its stored energy is predicted far '
-              'better than from the conditions alone')
-
+            + '. At 23 mm in air, where the seats spread widest, a trial that records where the '
+              'arm sat has its stored energy predicted far better than from the conditions '
+              f'alone. The scenes were identified with the arm at the recorded angle and the '
+              f'pivot\'s hold fitted to make up the energy; where the tracks show every arm '
+              f'further out ({outward}), the seated scene stores too little: scenes meant for '
+              f'seated trials would be identified seated')
 
 def contact_angle_finding(data: Path, scene, strikes, mapper) -> str:
     """Air at 23 mm: what the recorded contact angle goes with in the tracks (the arm's and
@@ -501,6 +511,7 @@ def main() -> int:
         contact = contact_angle_finding(args.data, shipped['air_23mm'], strikes, mapper)
         rows_now = fidelity.error_rows(strikes, now)
         typical_day = typical_day_finding(shipped, strikes, mapper, rows_now)
+        seat_given = at_tracked_seats(shipped, strikes, mapper, rows_now)
     rows_before = fidelity.error_rows(strikes, before)
     FIGURES.mkdir(parents=True, exist_ok=True)
     compare_plots.plot_parity(rows_now, FIGURES / 'parity.png')
@@ -514,7 +525,6 @@ def main() -> int:
                       if p.get('cross_validation_by_day')), {})
     not_struck = [r for r in rows_now if r['status'] != 'strike']
     seat_lines, seat_text = seat_table(args.data, shipped['air_23mm'], reference['air_23mm'])
-    seat_given = at_tracked_seats(args.data, shipped['air_23mm'], strikes, rows_now)
     days_table, latch_follows = day_states_table(own_latched, own_holds, strikes,
                                                  tracked_arm_at_overcentering(args.data))
     ratio = provenance['air_23mm']['parameters']['hinge.kinetic_friction_ratio']

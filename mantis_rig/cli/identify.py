@@ -83,6 +83,12 @@ def add_commands(commands) -> None:
     compare.add_argument('--out', type=Path, required=True, help='folder for the outputs')
     compare.add_argument('--figure', action='append', default=[], metavar='TRIAL',
                          help='a trial to plot (theta1, theta3 and rates); repeatable')
+    compare.add_argument('--at-seat', action='store_true',
+                         help='latch each simulated arm where its strike\'s tracks show it at '
+                              'overcentering (the table\'s seat_deg, or the processed record '
+                              'at the table\'s t_oc_s) rather than at the recorded contact '
+                              'angle; strikes without a seat stay at the contact angle and are '
+                              'listed')
     compare.set_defaults(run=run_compare)
 
 
@@ -284,7 +290,8 @@ def run_compare(args) -> int:
                          f'--processed or --export for it)')
     check_out_folder(args.out)
     with ClusterMap(args.scheduler, args.workers, progress=not args.json) as mapper:
-        model = ident.StrikeModel(scenes, strikes, [], ident.Weights(), mapper)
+        model = ident.StrikeModel(scenes, strikes, [], ident.Weights(), mapper,
+                                  at_seat=args.at_seat)
         simulated = model.simulate([[]])[0]
     from mantis_sim.studies import compare_plots
     args.out.mkdir(parents=True, exist_ok=True)
@@ -302,6 +309,9 @@ def run_compare(args) -> int:
               'effects': fidelity.effect_slopes(rows),
               'not_struck': [{'trial': r['trial'], 'status': r['status'], 'reason': r['reason']}
                              for r in rows if r['status'] != 'strike'],
+              'at_seat': args.at_seat,
+              'without_seat': [s.trial for s in strikes if s.seat_deg is None]
+              if args.at_seat else [],
               'outputs': sorted(str(p) for p in args.out.iterdir())}
     if args.json:
         print(json.dumps(json_safe(report)))
@@ -331,5 +341,9 @@ def _compare_text(report: dict) -> str:
                      f'{e["sim"]:+7.3f} {e["unit"]}  {mark}')
     for r in report['not_struck']:
         lines.append(f'{r["status"]}: {r["trial"]}: {r["reason"]}')
+    if report['at_seat']:
+        lines.append('arms latched at their tracked seats'
+                     + (f'; no seat, at the contact angle: {", ".join(report["without_seat"])}'
+                        if report['without_seat'] else ''))
     lines.append('outputs: ' + ', '.join(report['outputs']))
     return '\n'.join(lines)

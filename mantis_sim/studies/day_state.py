@@ -28,12 +28,11 @@ import numpy as np
 from mantis_sim.model import kinetic_lever
 from mantis_sim.scene import Scene
 
-from .fidelity import SimulatedStrike, error_rows, group_summary
+from .fidelity import LATCH_KEY, SimulatedStrike, error_rows, group_summary
 from .identify import FreeParameter, Weights, scene_value, simulate_task, strike_residuals
 from .strikes import RealStrike
 
 HOLD_KEY = 'hinge.friction_lever_mm'
-LATCH_KEY = 'geometry.latch_offset_deg'
 # the latched arm angle, contact angle + offset, must lie in [0, 15] degrees: a strike whose
 # angle cannot take an offset counts as failed at it
 DEFAULT_DAY_KEY = f'{LATCH_KEY}=-5:12'

@@ -27,6 +27,8 @@ from .strikes import RealStrike, StrikeSeries, lab_spring_energy_mJ
 # that of water ~20 ms; the grid resolves the arm's fastest swing (~0.2 ms per radian).
 SERIES_WINDOW_S = {'air': (-1.0e-3, 6.0e-3), 'water': (-2.0e-3, 22.0e-3)}
 SERIES_STEP_S = {'air': 0.2e-3, 'water': 0.5e-3}
+# Where the arm sits on the latch: the latched arm angle is the contact angle + this offset.
+LATCH_KEY = 'geometry.latch_offset_deg'
 
 
 def strike_overrides(strike: RealStrike) -> list[str]:
@@ -34,6 +36,15 @@ def strike_overrides(strike: RealStrike) -> list[str]:
     return [f'geometry.d_t_mm={strike.d_t_mm!r}',
             f'geometry.contact_angle_deg={strike.contact_angle_deg!r}',
             f'drive.pull_speed_mm_per_s={strike.pull_mm_per_s!r}']
+
+
+def seat_values(strike: RealStrike) -> dict:
+    """The scene value that latches the simulated arm where the strike's tracks show it at
+    overcentering (`RealStrike.seat_deg`): with the pivot's hold of the identified scenes the
+    arm is still there at overcentering. {} for a strike without a seat."""
+    if strike.seat_deg is None:
+        return {}
+    return {LATCH_KEY: strike.seat_deg - strike.contact_angle_deg}
 
 
 def series_grid(medium: str) -> np.ndarray:
@@ -120,7 +131,8 @@ def error_rows(strikes: list[RealStrike], simulated: list[SimulatedStrike]) -> l
     for real, sim in zip(strikes, simulated):
         row = {'trial': real.trial, 'recording_day': real.recording_day, 'group': real.group,
                'd_t_mm': real.d_t_mm, 'contact_angle_deg': real.contact_angle_deg,
-               'pull_mm_per_s': real.pull_mm_per_s, 'status': sim.status, 'reason': sim.reason}
+               'pull_mm_per_s': real.pull_mm_per_s, 'seat_deg': real.seat_deg,
+               'status': sim.status, 'reason': sim.reason}
         for key, _, _ in COMPARED:
             measured, predicted = getattr(real, key), getattr(sim, key)
             row[f'real_{key}'] = measured
@@ -213,6 +225,6 @@ def effect_slopes(rows: list[dict]) -> list[dict]:
     return out
 
 
-__all__ = ['COMPARED', 'EFFECT_SLOPES', 'SimulatedStrike', 'Slope',
+__all__ = ['COMPARED', 'EFFECT_SLOPES', 'LATCH_KEY', 'SimulatedStrike', 'Slope',
            'effect_slopes', 'error_rows', 'fit_slope', 'fit_slopes', 'group_summary',
-           'real_on_grid', 'series_grid', 'simulate_strike', 'strike_overrides']
+           'real_on_grid', 'seat_values', 'series_grid', 'simulate_strike', 'strike_overrides']

@@ -37,7 +37,7 @@ from mantis_sim.model import kinetic_lever
 from mantis_sim.parameters import SECTIONS
 from mantis_sim.scene import Scene
 
-from .fidelity import SimulatedStrike, real_on_grid, simulate_strike
+from .fidelity import SimulatedStrike, real_on_grid, seat_values, simulate_strike
 from .strikes import RealStrike
 
 CORRELATION_WARNING = 0.9
@@ -311,23 +311,27 @@ def simulate_task(task) -> SimulatedStrike:
 
 class StrikeModel:
     """Simulates the strikes for parameter sets, many at once, through ``mapper``
-    (mapper(function, tasks) -> results in order: serial, or on a Dask cluster)."""
+    (mapper(function, tasks) -> results in order: serial, or on a Dask cluster). With
+    ``at_seat`` each strike that has a tracked seat is simulated with its arm latched there
+    (fidelity.seat_values), the free parameters set beside."""
 
     def __init__(self, scenes: dict[str, Scene], strikes: list[RealStrike],
-                 params: list[FreeParameter], weights: Weights, mapper: Callable):
+                 params: list[FreeParameter], weights: Weights, mapper: Callable,
+                 at_seat: bool = False):
         missing = sorted({s.group for s in strikes} - set(scenes))
         if missing:
             raise IdentificationError(f'no scene for the strikes of group(s) '
                                       f'{", ".join(missing)}')
         self.scenes, self.strikes, self.params = scenes, strikes, params
-        self.weights, self.mapper = weights, mapper
+        self.weights, self.mapper, self.at_seat = weights, mapper, at_seat
         self.evaluations = 0
 
     def simulate(self, value_sets: list[np.ndarray]) -> list[list[SimulatedStrike]]:
         tasks = []
         for values in value_sets:
             tasks.extend((self.scenes[s.group], s, s.series is not None,
-                          values_for_strike(self.params, values, s))
+                          {**(seat_values(s) if self.at_seat else {}),
+                           **values_for_strike(self.params, values, s)})
                          for s in self.strikes)
         results = self.mapper(simulate_task, tasks)
         self.evaluations += len(value_sets)

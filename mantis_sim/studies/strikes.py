@@ -8,6 +8,11 @@ plain-text forms: a summary table (CSV, one row per strike) and a processed reco
 authors' six columns per camera frame). Tracker exports are read by the rig package's analysis,
 which builds the same `StrikeSeries`.
 
+Where the arm sat on the latch (`RealStrike.seat_deg`: the arm's angle relative to the body at
+the lab's overcentering) decides most of a strike's stored energy and is not among the
+conditions (docs/fidelity.md); a table may give it (column `seat_deg`), or a processed record
+shows it at the table's overcentering time `t_oc_s`.
+
 The lab's spring energy is a convention, not a model's: k_s/2 (theta1 - theta1_rest)^2 of the
 body angle at phase IV, with k_s = 47.7 N mm/rad and theta1_rest = 4.0736 rad (every row of
 the authors' table satisfies it with that rest angle, to 3e-4 rad). A simulated strike's
@@ -44,7 +49,10 @@ SUMMARY_VALUES = {            # column -> RealStrike field
 }
 # Plausible ranges of the conditions: a value outside is a unit mix-up or a typo, refused.
 CONDITION_RANGES = {'d_t_mm': (5.0, 60.0), 'contact_angle_deg': (0.0, 15.0),
-                    'pull_mm_per_s': (0.01, 50.0)}
+                    'pull_mm_per_s': (0.01, 50.0), 'seat_deg': (-5.0, 30.0)}
+# An overcentering time within a record's first this many seconds marks overcentering before
+# the recording began (the table's notes: "F_oc at the recording start"): no seat is read there.
+SEAT_MIN_INTO_RECORD_S = 0.05
 
 
 class StrikeDataError(InputError):
@@ -86,6 +94,7 @@ class RealStrike:
     peak_arm_speed_radps: Optional[float] = None
     series: Optional[StrikeSeries] = field(default=None, compare=False)
     source: str = ''
+    seat_deg: Optional[float] = None    # the arm's angle on the body at overcentering, tracked
 
     @property
     def group(self) -> str:
@@ -123,7 +132,7 @@ def _check_range(value: float, name: str, where: str) -> float:
 def read_summary_table(path: Path) -> list[RealStrike]:
     """One RealStrike per row of a summary table (columns of authors_summary_train.csv:
     trial, medium, d_t_mm, contact_angle_deg, pull_measured_mm_s or pull_nominal_mm_s, and any of
-    v_max_mps, PE_max_mJ, peak_body_radps, peak_arm_radps, recording_day)."""
+    v_max_mps, PE_max_mJ, peak_body_radps, peak_arm_radps, recording_day, seat_deg)."""
     path = Path(path)
     try:
         with open(path, newline='', encoding='utf-8') as handle:
@@ -158,6 +167,7 @@ def read_summary_table(path: Path) -> list[RealStrike]:
             raise StrikeDataError(f'{where}: no pull speed (columns {", ".join(PULL_COLUMNS)})')
         values = {attr: _number(row.get(col, ''), where, col, False)
                   for col, attr in SUMMARY_VALUES.items()}
+        seat = _number(row.get('seat_deg', ''), where, 'seat_deg', False)
         strikes.append(RealStrike(
             trial=trial, medium=medium,
             d_t_mm=_check_range(_number(row['d_t_mm'], where, 'd_t_mm', True), 'd_t_mm', where),
@@ -166,6 +176,7 @@ def read_summary_table(path: Path) -> list[RealStrike]:
                 'contact_angle_deg', where),
             pull_mm_per_s=_check_range(pull, 'pull_mm_per_s', where),
             recording_day=(row.get('recording_day') or '').strip(), source=str(path),
+            seat_deg=None if seat is None else _check_range(seat, 'seat_deg', where),
             **values))
     return strikes
 
@@ -174,6 +185,11 @@ def read_processed_record(path: Path, phase_iv_s: float) -> StrikeSeries:
     """The authors' processed record of one strike (CSV, optionally gzipped, no header: time
     s, theta1 rad, theta2 rad (the arm relative to the body), their rates, tendon force N),
     re-timed so that t = 0 at phase IV (``phase_iv_s``, in the record's time)."""
+    return _strike_series(*_load_processed(path), phase_iv_s)
+
+
+def _load_processed(path: Path) -> tuple[Path, np.ndarray, np.ndarray]:
+    """(path, frame times s, the record's columns) of a processed record, checked."""
     path = Path(path)
     opener = gzip.open if path.suffix == '.gz' else open
     try:
@@ -187,7 +203,10 @@ def read_processed_record(path: Path, phase_iv_s: float) -> StrikeSeries:
                               f'{data.shape[1]} columns and {data.shape[0]} frames')
     if not np.all(np.isfinite(data[:, :3])):
         raise StrikeDataError(f'{path}: the times and angles must be finite numbers')
-    t = _frame_times(data[:, 0], path)
+    return path, _frame_times(data[:, 0], path), data
+
+
+def _strike_series(path: Path, t: np.ndarray, data: np.ndarray, phase_iv_s: float) -> StrikeSeries:
     theta1, theta3, force = data[:, 1], data[:, 2], data[:, 5]
     if not t[0] <= phase_iv_s <= t[-1]:
         raise StrikeDataError(f'{path}: phase IV at {phase_iv_s:g} s is outside the record '
@@ -209,10 +228,23 @@ def _frame_times(recorded: np.ndarray, path: Path) -> np.ndarray:
     return rebuilt
 
 
+def seat_in_record(t: np.ndarray, theta2_rad: np.ndarray,
+                   overcentering_s: Optional[float]) -> Optional[float]:
+    """The arm's angle relative to the body (deg) at the lab's overcentering time, or None where
+    that time is unknown, outside the record or within its first SEAT_MIN_INTO_RECORD_S."""
+    if overcentering_s is None or not t[0] + SEAT_MIN_INTO_RECORD_S <= overcentering_s <= t[-1]:
+        return None
+    return float(np.degrees(np.interp(overcentering_s, t, theta2_rad)))
+
+
 def attach_processed_records(strikes: list[RealStrike], folder: Path,
-                             phase_iv_column: dict[str, float]) -> list[RealStrike]:
+                             phase_iv_column: dict[str, float],
+                             overcentering_column: Optional[dict[str, float]] = None
+                             ) -> list[RealStrike]:
     """Each strike with its processed record `<trial>_data.csv.gz` (or .csv) from folder, where
-    there is one; ``phase_iv_column`` maps trial -> phase IV time in its record."""
+    there is one; ``phase_iv_column`` maps trial -> phase IV time in its record, and
+    ``overcentering_column`` trial -> the lab's overcentering time, where the arm's seat is
+    read (unless the table gave the seat)."""
     out = []
     for strike in strikes:
         candidates = [Path(folder) / f'{strike.trial}_data.csv{ext}' for ext in ('.gz', '')]
@@ -220,8 +252,13 @@ def attach_processed_records(strikes: list[RealStrike], folder: Path,
         if found is None or strike.trial not in phase_iv_column:
             out.append(strike)
             continue
-        out.append(strike.with_series(read_processed_record(found, phase_iv_column[strike.trial]),
-                                      str(found)))
+        path, t, data = _load_processed(found)
+        with_record = strike.with_series(
+            _strike_series(path, t, data, phase_iv_column[strike.trial]), str(found))
+        if strike.seat_deg is None:
+            with_record = replace(with_record, seat_deg=seat_in_record(
+                t, data[:, 2], (overcentering_column or {}).get(strike.trial)))
+        out.append(with_record)
     return out
 
 
@@ -233,16 +270,27 @@ def read_strikes(table: Path, processed: Optional[Path] = None) -> list[RealStri
         return strikes
     if not Path(processed).is_dir():
         raise StrikeDataError(f'{processed}: no such folder of processed records')
-    return attach_processed_records(strikes, processed, phase_iv_times(table))
+    return attach_processed_records(strikes, processed, phase_iv_times(table),
+                                    record_times(table, 't_oc_s'))
 
 
 def phase_iv_times(path: Path) -> dict[str, float]:
     """trial -> t_z1_s (phase IV in the record's time) from a summary table that has it."""
+    return record_times(path, 't_z1_s')
+
+
+def record_times(path: Path, column: str) -> dict[str, float]:
+    """trial -> a time in the trial's record (s) from a summary table's column, where given."""
     with open(path, newline='', encoding='utf-8') as handle:
-        return {row['trial'].strip(): float(row['t_z1_s']) for row in csv.DictReader(handle)
-                if (row.get('t_z1_s') or '').strip()}
+        rows = list(csv.DictReader(handle))
+    out = {}
+    for number, row in enumerate(rows, start=2):
+        if (row.get(column) or '').strip():
+            out[row['trial'].strip()] = _number(row[column], f'{path} row {number}', column, True)
+    return out
 
 
 __all__ = ['LAB_SPRING_K_NMM_PER_RAD', 'LAB_THETA1_REST_RAD', 'RealStrike', 'StrikeDataError',
            'StrikeSeries', 'attach_processed_records', 'lab_spring_energy_mJ',
-           'phase_iv_times', 'read_processed_record', 'read_strikes', 'read_summary_table']
+           'phase_iv_times', 'read_processed_record', 'read_strikes', 'read_summary_table',
+           'record_times', 'seat_in_record']

@@ -20,12 +20,16 @@ from mantis_sim.studies import fidelity
 from mantis_sim.studies import identify as ident
 from mantis_sim.studies.strikes import (
     LAB_THETA1_REST_RAD,
+    SEAT_MIN_INTO_RECORD_S,
     RealStrike,
     StrikeDataError,
     lab_spring_energy_mJ,
     phase_iv_times,
     read_processed_record,
+    read_strikes,
     read_summary_table,
+    record_times,
+    seat_in_record,
 )
 
 TABLE = 'real_trials/authors_summary_train.csv'
@@ -76,6 +80,8 @@ def _table_with(tmp_path, edit):
     (lambda h, r: ([c for c in h if not c.startswith('pull')], r), 'pull_measured_mm_s or '
                                                                    'pull_nominal_mm_s'),
     (lambda h, r: (h, []), 'no rows'),
+    (lambda h, r: ([*h, 'seat_deg'], [{**r[0], 'seat_deg': '0.5'}, {**r[1], 'seat_deg': '95'}]),
+     r'row 3 .*seat_deg = 95 is outside \[-5, 30\]'),
 ])
 def test_a_broken_summary_table_is_refused_naming_row_and_column(tmp_path, edit, message):
     with pytest.raises(StrikeDataError, match=message):
@@ -96,6 +102,32 @@ def test_a_processed_record_is_timed_from_phase_iv_with_its_frames_rebuilt():
         assert lab_spring_energy_mJ(theta1_iv) == pytest.approx(
             strikes[trial].spring_energy_mJ, rel=2e-3)
     assert LAB_THETA1_REST_RAD == pytest.approx(4.0736)
+
+
+def test_the_arm_s_seat_is_read_at_overcentering_and_not_before_the_recording():
+    strikes = {s.trial: s for s in read_strikes(data_file(TABLE), data_file(PROCESSED))}
+    t_oc = record_times(data_file(TABLE), 't_oc_s')[AIR23]
+    raw = np.loadtxt(gzip.open(record(AIR23), 'rt'), delimiter=',')
+    assert strikes[AIR23].seat_deg == pytest.approx(
+        np.degrees(np.interp(t_oc, raw[:, 0], raw[:, 2])), abs=0.05)
+    # a strike without a record has no seat, unless the table gives one
+    assert strikes['0828019_19kfps_T_2X_A_1_1_2p3_-3_2'].seat_deg is None
+    # the authors put overcentering before the recording at its first frames (their notes):
+    # no seat is read there, nor outside the record
+    t = np.arange(0.0, 2.0, 1e-3)
+    theta2 = np.radians(3.0 + t)
+    assert seat_in_record(t, theta2, 1.0) == pytest.approx(4.0)
+    assert seat_in_record(t, theta2, SEAT_MIN_INTO_RECORD_S / 2) is None
+    assert seat_in_record(t, theta2, 2.5) is None
+    assert seat_in_record(t, theta2, None) is None
+
+
+def test_a_seat_in_the_table_is_taken_before_the_record_s(tmp_path):
+    table = _table_with(tmp_path, lambda h, r: ([*h, 'seat_deg'], [
+        {**row, 'seat_deg': '7.5' if row['trial'] == AIR23 else ''} for row in r]))
+    strikes = {s.trial: s for s in read_strikes(table, data_file(PROCESSED))}
+    assert strikes[AIR23].seat_deg == 7.5
+    assert strikes[WATER].seat_deg == pytest.approx(4.08, abs=0.05)    # from its record
 
 
 def test_damaged_processed_records_are_refused(tmp_path):
@@ -228,6 +260,33 @@ def test_compare_writes_errors_parity_and_a_trial_figure(tmp_path, capsys):
     # no air 23 mm strikes here: that effect cannot be estimated, and says so as null
     assert report['effects'][1]['real'] is None
     assert all(r['status'] == 'strike' for r in rows)
+
+
+def test_compare_at_the_tracked_seats_latches_each_arm_where_its_tracks_show_it(tmp_path,
+                                                                                capsys):
+    far_out = '0828019_19kfps_T_2X_A_1_1_2p3_-3_2'      # tracked 12.2 degrees out, recorded 2.8
+    table = _table_with(tmp_path, lambda h, r: ([*h, 'seat_deg'], [
+        {**row, 'seat_deg': {far_out: '12.2', AIR23: '25'}.get(row['trial'], '')}
+        for row in r if row['trial'] in (far_out, AIR23, '111419_8kfps_T_2X_A_16_1_0p5_-10_5_1')]))
+    runs = {}
+    for name, extra in (('recorded', []), ('seated', ['--at-seat'])):
+        code = mantis(['compare', '--strikes', str(table), '--processed', str(data_file(PROCESSED)),
+                       '--out', str(tmp_path / name), '--workers', '0', *extra])
+        assert code == 0
+        runs[name] = {r['trial']: r for r in csv.DictReader(open(tmp_path / name / 'errors.csv'))}
+        runs[name + '_text'] = capsys.readouterr().out
+    recorded, seated = runs['recorded'][far_out], runs['seated'][far_out]
+    assert float(seated['seat_deg']) == pytest.approx(12.2, abs=0.1)
+    # seated further out, the arm overcentres earlier: less stored, as measured
+    assert abs(float(seated['error_spring_energy_mJ'])) < 0.1 < abs(
+        float(recorded['error_spring_energy_mJ']))
+    # a seat the latch cannot take is a failed strike with the reason, not a silent default
+    assert runs['seated'][AIR23]['status'] == 'failed'
+    assert 'latch_offset_deg' in runs['seated'][AIR23]['reason']
+    assert runs['recorded'][AIR23]['status'] == 'strike'
+    # overcentering before the recording: no seat, simulated at the contact angle and listed
+    assert 'no seat, at the contact angle: 111419_8kfps_T_2X_A_16_1_0p5_-10_5_1' in \
+        runs['seated_text']
 
 
 @pytest.mark.slow
