@@ -72,6 +72,7 @@ def add_commands(commands) -> None:
                                 'beyond SCALE count less than their square (SCALE in weighted-'
                                 'residual units: a relative error at weight 1, e.g. '
                                 'soft_l1:0.01)')
+    _at_seat_argument(ident_cmd)
     ident_cmd.set_defaults(run=run_identify)
 
     compare = commands.add_parser(
@@ -83,13 +84,16 @@ def add_commands(commands) -> None:
     compare.add_argument('--out', type=Path, required=True, help='folder for the outputs')
     compare.add_argument('--figure', action='append', default=[], metavar='TRIAL',
                          help='a trial to plot (theta1, theta3 and rates); repeatable')
-    compare.add_argument('--at-seat', action='store_true',
-                         help='latch each simulated arm where its strike\'s tracks show it at '
-                              'overcentering (the table\'s seat_deg, or the processed record '
-                              'at the table\'s t_oc_s) rather than at the recorded contact '
-                              'angle; strikes without a seat stay at the contact angle and are '
-                              'listed')
+    _at_seat_argument(compare)
     compare.set_defaults(run=run_compare)
+
+
+def _at_seat_argument(parser) -> None:
+    parser.add_argument('--at-seat', action='store_true',
+                        help='latch each simulated arm where its strike\'s tracks show it at '
+                             'overcentering (the table\'s seat_deg, or the processed record at '
+                             'the table\'s t_oc_s) rather than at the recorded contact angle; '
+                             'strikes without a seat stay at the contact angle and are listed')
 
 
 def _strike_arguments(parser) -> None:
@@ -173,6 +177,10 @@ def run_identify(args) -> int:
         params += ident.per_day_parameters(param, strikes)
     weights = ident.Weights.parse(args.weight)
     loss = ident.Loss.parse(args.loss)
+    if args.at_seat and any(p.key == fidelity.LATCH_KEY for p in params):
+        raise InputError(f'--at-seat latches each arm at its tracked seat, which a fit of '
+                         f'{fidelity.LATCH_KEY} (--fit or --per-day) would set again: use one '
+                         f'or the other')
     if args.iterations < 1:
         raise InputError(f'--iterations {args.iterations}: must be >= 1')
     if args.cv_iterations < 0:
@@ -181,7 +189,10 @@ def run_identify(args) -> int:
     with ClusterMap(args.scheduler, args.workers, progress=not args.json) as mapper:
         _log(f'identify: {len(strikes)} strikes ({", ".join(sorted(scenes))}), '
              f'{len(params)} parameters, on {mapper.where} ({mapper.worker_count} worker(s))')
-        model = ident.StrikeModel(scenes, strikes, params, weights, mapper)
+        if args.at_seat:
+            _log(_without_seat_line(strikes))
+        model = ident.StrikeModel(scenes, strikes, params, weights, mapper,
+                                  at_seat=args.at_seat)
         start = _per_day_starts(scenes, strikes, params, per_day, weights, mapper)
         fit = ident.identify(model, start, max_iterations=args.iterations, log=_log, loss=loss)
         folds, cv_method = None, ''
@@ -210,6 +221,12 @@ def run_identify(args) -> int:
     else:
         print(_identify_text(report))
     return 0
+
+
+def _without_seat_line(strikes: list[RealStrike]) -> str:
+    missing = [s.trial for s in strikes if s.seat_deg is None]
+    return (f'arms latched at their tracked seats ({len(strikes) - len(missing)} strikes)'
+            + (f'; no seat, at the contact angle: {", ".join(missing)}' if missing else ''))
 
 
 def _per_day_starts(scenes, strikes, params, per_day, weights, mapper):
@@ -312,6 +329,7 @@ def run_compare(args) -> int:
               'at_seat': args.at_seat,
               'without_seat': [s.trial for s in strikes if s.seat_deg is None]
               if args.at_seat else [],
+              'at_seat_line': _without_seat_line(strikes) if args.at_seat else '',
               'outputs': sorted(str(p) for p in args.out.iterdir())}
     if args.json:
         print(json.dumps(json_safe(report)))
@@ -342,8 +360,6 @@ def _compare_text(report: dict) -> str:
     for r in report['not_struck']:
         lines.append(f'{r["status"]}: {r["trial"]}: {r["reason"]}')
     if report['at_seat']:
-        lines.append('arms latched at their tracked seats'
-                     + (f'; no seat, at the contact angle: {", ".join(report["without_seat"])}'
-                        if report['without_seat'] else ''))
+        lines.append(report['at_seat_line'])
     lines.append('outputs: ' + ', '.join(report['outputs']))
     return '\n'.join(lines)

@@ -242,6 +242,7 @@ class Identification:
     residual: Optional[np.ndarray] = None
     row_strike: Optional[np.ndarray] = None     # the strike of each residual
     loss: Loss = Loss()
+    at_seat: bool = False       # each strike's arm latched at its tracked seat (StrikeModel)
     started: str = field(default_factory=lambda: datetime.datetime.now(
         datetime.UTC).isoformat(timespec='seconds'))
 
@@ -326,6 +327,12 @@ class StrikeModel:
         self.weights, self.mapper, self.at_seat = weights, mapper, at_seat
         self.evaluations = 0
 
+    def of(self, strikes: list[RealStrike],
+           params: Optional[list[FreeParameter]] = None) -> StrikeModel:
+        """The same model for other strikes (and free parameters), e.g. a left-out day's."""
+        return StrikeModel(self.scenes, strikes, self.params if params is None else params,
+                           self.weights, self.mapper, self.at_seat)
+
     def simulate(self, value_sets: list[np.ndarray]) -> list[list[SimulatedStrike]]:
         tasks = []
         for values in value_sets:
@@ -409,7 +416,7 @@ def identify(model: StrikeModel, initial: Optional[Sequence[float]] = None,
                           float(solution.cost), residual.size, model.evaluations,
                           time.monotonic() - started, model.strikes, simulated,
                           solution.message, jacobian, residual, model.row_strike.copy(),
-                          loss=loss)
+                          loss=loss, at_seat=model.at_seat)
 
 
 def _uncertainty(jacobian: np.ndarray, residual: np.ndarray, n: int):
@@ -472,8 +479,7 @@ def cross_validate_one_step(model: StrikeModel, fit: Identification,
         step = -np.linalg.pinv(j.T @ j) @ (j.T @ r)
         values = _without_the_day(model, np.clip(fit.values + step, lower, upper), day)
         test = [s for s in model.strikes if s.recording_day == day]
-        predicted = StrikeModel(model.scenes, test, model.params, model.weights,
-                                model.mapper).simulate([values])[0]
+        predicted = model.of(test).simulate([values])[0]
         log(f'left out {day}: {len(test)} strikes')
         folds.append(FoldResult(day, test, predicted, values))
     return folds
@@ -510,14 +516,13 @@ def cross_validate(model: StrikeModel, fitted: np.ndarray, max_iterations: int =
         free = [p for p in model.params if (p.groups is None or set(p.groups) & train_groups)
                 and p.day != day]
         fixed = [(p, v) for p, v in zip(model.params, fitted) if p not in free]
-        sub = StrikeModel(model.scenes, train, free, model.weights, model.mapper)
+        sub = model.of(train, free)
         start = [v for p, v in zip(model.params, fitted) if p in free]
         fit = identify(sub, start, max_iterations=max_iterations, loss=loss)
         values = dict(zip(free, fit.values))
         values.update(dict(fixed))
         full = _without_the_day(model, np.array([values[p] for p in model.params]), day)
-        predicted = StrikeModel(model.scenes, test, model.params, model.weights,
-                                model.mapper).simulate([full])[0]
+        predicted = model.of(test).simulate([full])[0]
         log(f'left out {day}: {len(test)} strikes')
         folds.append(FoldResult(day, test, predicted, full))
     return folds
@@ -587,6 +592,8 @@ def calibrated_scene(base: dict, fit: Identification, group: str,
                         for a, b, rho in fit.inseparable_pairs()],
         'weights': asdict(weights or Weights()),
         'loss': fit.loss.label,
+        **({'at_seat': 'each strike\'s arm latched at its tracked seat (mantis identify '
+                       '--at-seat)'} if fit.at_seat else {}),
         'cost': float(f'{fit.cost:.5g}'),
         'fitted_errors': error_summary(fit.strikes, fit.simulated),
         'optimiser': fit.message,
@@ -605,7 +612,7 @@ def calibrated_scene(base: dict, fit: Identification, group: str,
     return doc
 
 
-STAGE_KEYS = ('date', 'strikes', 'weights', 'loss', 'cost', 'fitted_errors',
+STAGE_KEYS = ('date', 'strikes', 'weights', 'loss', 'at_seat', 'cost', 'fitted_errors',
               'cross_validated_errors', 'cross_validation', 'optimiser', 'day_states')
 
 

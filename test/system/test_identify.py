@@ -290,6 +290,30 @@ def test_compare_at_the_tracked_seats_latches_each_arm_where_its_tracks_show_it(
 
 
 @pytest.mark.slow
+def test_identify_at_the_tracked_seats_fits_seated_strikes_and_says_so(tmp_path, capsys):
+    table = _table_with(tmp_path, lambda h, r: ([*h, 'seat_deg'], [
+        {**row, 'seat_deg': '5.0'} for row in r if row['trial'] in (
+            WATER, '011720_11kfps_T_2X_W_1_1_1p5_-7_7_3', '011720_6kfps_T_2X_W_3_1_0p5_-7_7_2')]))
+    out = tmp_path / 'scenes'
+    code = mantis(['identify', '--strikes', str(table), '--out', str(out), '--at-seat',
+                   '--fit', 'arm.blade_drag_broadside=0.5:6', '--iterations', '1',
+                   '--workers', '0', '--cross-validate'])
+    assert code == 0
+    assert 'arms latched at their tracked seats (3 strikes)' in capsys.readouterr().err
+    provenance = load_scene_file(out / 'water_23mm.yaml').provenance
+    assert 'tracked seat' in provenance['at_seat']
+    assert set(provenance['cross_validation_by_day']) == {'011620', '011720'}
+
+
+def test_a_seated_model_stays_seated_for_a_left_out_day():
+    strikes = read_summary_table(data_file(TABLE))
+    model = ident.StrikeModel({'air_23mm': load_scene('air_23mm')}, strikes[:0], [],
+                              ident.Weights(), lambda f, tasks: [f(t) for t in tasks],
+                              at_seat=True)
+    assert model.of(strikes[:0]).at_seat
+
+
+@pytest.mark.slow
 def test_identify_writes_a_calibrated_scene_with_its_provenance(tmp_path, capsys):
     out = tmp_path / 'scenes'
     code = mantis(['identify', '--strikes', str(data_file(TABLE)), '--processed',
@@ -332,6 +356,8 @@ def test_identify_writes_a_calibrated_scene_with_its_provenance(tmp_path, capsys
     (['--fit', 'geometry.L2_mm', '--weight', 'series=-1'], 'must be a finite number >= 0'),
     (['--fit', 'geometry.L2_mm', '--weight', 'speed=1'], 'expected NAME=VALUE'),
     (['--fit', 'geometry.L2_mm', '--loss', 'l1'], 'NAME must be one of'),
+    (['--fit', 'geometry.L2_mm', '--per-day', 'geometry.latch_offset_deg=-5:5', '--at-seat'],
+     'use one or the other'),
 ])
 def test_identify_refuses_bad_input_before_any_work(tmp_path, capsys, extra, message):
     code = mantis(['identify', '--strikes', str(data_file(TABLE)), '--out',
