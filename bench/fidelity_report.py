@@ -249,7 +249,7 @@ def _model_seats(scene, offsets=(-3.0, 0.0, 3.0, 6.0, 9.0)) -> dict[str, np.ndar
     arm's and the body's angle at overcentering (deg), spring energy (mJ), peak tip speed."""
     out = {k: [] for k in ('arm_oc', 'body_oc', 'energy', 'tip')}
     for offset in offsets:
-        result = simulate(scene.with_values({day_state.LATCH_KEY: offset}), dense=True)
+        result = simulate(scene.with_values({fidelity.LATCH_KEY: offset}), dense=True)
         m = result.metrics
         body, arm = result.state_at(m['phase_start_s']['III'] * 1e3)[:2]
         out['arm_oc'].append(math.degrees(arm))
@@ -339,9 +339,14 @@ def at_tracked_seats(scenes, strikes, mapper, rows_now) -> str:
         return ' and '.join(apct(fidelity.group_summary(rows, key)[group]['median_abs_error'])
                             for key in ('peak_tip_speed_mps', 'spring_energy_mJ'))
     failed = sum(r['status'] != 'strike' for r in rows_seated)
+
+    def energy_23(rows):
+        return fidelity.group_summary(rows, 'spring_energy_mJ')['air_23mm']['median_abs_error']
+    outward_groups = [g for g in GROUPS if g != 'air_23mm' and all(
+        s.seat_deg > s.contact_angle_deg for s in chosen if s.group == g)]
     outward = '; '.join(
         f'{g}: recorded {_spread(of_group, "contact_angle_deg")} degrees, tracked '
-        f'{_spread(of_group, "seat_deg")}' for g in ('air_19mm', 'water_23mm')
+        f'{_spread(of_group, "seat_deg")}' for g in outward_groups
         for of_group in [[s for s in chosen if s.group == g]])
     per_group = '; '.join(
         f'{g} ({sum(s.group == g for s in chosen)} strikes) {errors(rows_seated, g)}, against '
@@ -351,12 +356,15 @@ def at_tracked_seats(scenes, strikes, mapper, rows_now) -> str:
             f'angle - the recorded contact angle; nothing fitted), the identified scenes\' '
             f'median |error| in tip speed and spring energy is: {per_group}'
             + (f' ({failed} could not be seated)' if failed else '')
-            + '. At 23 mm in air, where the seats spread widest, a trial that records where the '
-              'arm sat has its stored energy predicted far better than from the conditions '
-              f'alone. The scenes were identified with the arm at the recorded angle and the '
-              f'pivot\'s hold fitted to make up the energy; where the tracks show every arm '
-              f'further out ({outward}), the seated scene stores too little: scenes meant for '
-              f'seated trials would be identified seated')
+            + ('. At 23 mm in air, where the seats spread widest, a trial that records where '
+               'the arm sat has its stored energy predicted far better than from the conditions '
+               'alone' if energy_23(rows_seated) < 0.5 * energy_23(rows_recorded) else '')
+            + '. The scenes were identified with the arm at the recorded angle and the '
+              'pivot\'s hold fitted to make up the energy'
+            + (f'; where the tracks show every arm further out ({outward}), the seated scene '
+               f'stores too little' if outward else '')
+            + ': scenes meant for seated trials would be identified seated')
+
 
 # What a seated identification frees (mantis identify --at-seat), from the shipped values.
 SEATED_FIT = ('hinge.friction_lever_mm@air_19mm=0:1',
@@ -367,8 +375,9 @@ SEATED_FIT = ('hinge.friction_lever_mm@air_19mm=0:1',
 def typical_seat(scenes, strikes, mapper, params, values) -> str:
     """The seated fit judged as the shipped scenes are, by the conditions alone: each group's
     arm latched at its strikes' median seat above the recorded contact angle."""
-    offsets = {g: float(np.median([s.seat_deg - s.contact_angle_deg for s in strikes
-                                   if s.group == g and s.seat_deg is not None])) for g in GROUPS}
+    offsets = {g: float(np.median([fidelity.seat_values(s)[fidelity.LATCH_KEY]
+                                   for s in strikes if s.group == g and s.seat_deg is not None]
+                                  or [0.0])) for g in GROUPS}
     latch = [ident.parse_free_parameter(f'{fidelity.LATCH_KEY}@{g}', scenes) for g in GROUPS]
     model = ident.StrikeModel(scenes, strikes, [*params, *latch], ident.Weights(), mapper)
     rows = fidelity.error_rows(strikes, model.simulate(
@@ -387,8 +396,9 @@ def typical_seat(scenes, strikes, mapper, params, values) -> str:
             f'median seat ({", ".join(f"{g} {v:+.1f}" for g, v in offsets.items())} degrees '
             f'above the recorded contact angle), it gives the '
             f'{"; ".join(against_all(name) for name in guide)}, but the 23 mm strikes\' '
-            f'spring energy is {apct(energy)} off (median |error|): the typical seat lies '
-            f'between the two clusters of days')
+            f'spring energy is {apct(energy)} off (median |error|)'
+            + (': the typical seat lies between the two clusters of days'
+               if energy > 0.10 else ''))
 
 
 def seated_identification(scenes, strikes, mapper) -> tuple[list[str], str]:
@@ -417,9 +427,10 @@ def seated_identification(scenes, strikes, mapper) -> tuple[list[str], str]:
     ratio = hold[params[0].label] / hold[params[1].label]
     return lines, (f'Fitted so to the {len(seated)} strikes with a seat, the median |error| in '
                    f'tip speed and spring energy is {errors}; the effects over the same strikes, '
-                   f'simulated against real: {effects}. Seated, the 19 mm guide still wants '
-                   f'{ratio:.1f} times the 23 mm guide\'s hold: where the arm sits does not '
-                   f'explain the longer hold (below). {typical}')
+                   f'simulated against real: {effects}. Seated, the 19 mm guide wants '
+                   f'{ratio:.1f} times the 23 mm guide\'s hold'
+                   + (': where the arm sits does not explain the longer hold (below)'
+                      if ratio > 2.0 else '') + f'. {typical}')
 
 
 def contact_angle_finding(data: Path, scene, strikes, mapper) -> str:
@@ -467,10 +478,10 @@ def typical_day_finding(scenes, strikes, mapper, rows_now) -> str:
     offsets = {}
     for group, scene in scenes.items():
         states = (scene.provenance or {}).get('day_states') or {}
-        values = [v['value'] for k, v in states.items() if k.startswith(day_state.LATCH_KEY)]
+        values = [v['value'] for k, v in states.items() if k.startswith(fidelity.LATCH_KEY)]
         if values:
             offsets[group] = float(np.median(values))
-    moved = {g: s.with_values({day_state.LATCH_KEY: offsets.get(g, 0.0)})
+    moved = {g: s.with_values({fidelity.LATCH_KEY: offsets.get(g, 0.0)})
              for g, s in scenes.items()}
     rows = fidelity.error_rows(strikes, simulate_all(moved, strikes, mapper))
     failed = sum(r['status'] != 'strike' for r in rows)
@@ -500,10 +511,17 @@ def typical_day_finding(scenes, strikes, mapper, rows_now) -> str:
 
 
 def identifiable_finding(rows_now) -> str:
-    """How far from zero the training strikes put each effect, in its standard errors."""
+    """How far from zero the training strikes put each effect, in its standard errors, and
+    which of them lie within 1.5 of it (not identified by the training set)."""
     effects = fidelity.effect_slopes(rows_now)
-    return '; '.join(f'{e["effect"]}: {abs(e["real"]) / e["real_std_error"]:.1f}'
-                     for e in effects)
+    distance = [abs(e['real']) / e['real_std_error'] for e in effects]
+    near_zero = [e['effect'] for e, d in zip(effects, distance) if d < 1.5]
+    return ('; '.join(f'{e["effect"]}: {d:.1f}' for e, d in zip(effects, distance))
+            + '. An effect the training set holds within about one standard error of zero '
+              'cannot be identified from it'
+            + (f' (here: {", ".join(near_zero)})' if near_zero else ' (none here)')
+            + ': what the model gives for such an effect comes from its physics, not from a '
+              'term fitted to carry it')
 
 
 def tendon_force_finding(data: Path) -> str:
@@ -745,9 +763,6 @@ real and to the simulated values:
 The standard errors here are the 32 training strikes'. Over all 55 strikes with known conditions
 (issue 24) the real effects are {against_all}.
 How many standard errors from zero the training strikes put each real effect: {identifiable}.
-An effect the training set holds within about one standard error of zero cannot be identified
-from it (here the three effects on the tip speed): what the model gives for those comes from its
-physics, not from a term fitted to carry them.
 
 ## Strikes the model did not simulate to a strike
 {not_struck}

@@ -193,7 +193,8 @@ def run_identify(args) -> int:
             _log(_without_seat_line(strikes))
         model = ident.StrikeModel(scenes, strikes, params, weights, mapper,
                                   at_seat=args.at_seat)
-        start = _per_day_starts(scenes, strikes, params, per_day, weights, mapper)
+        start = _per_day_starts(scenes, strikes, params, per_day, weights, mapper,
+                                args.at_seat)
         fit = ident.identify(model, start, max_iterations=args.iterations, log=_log, loss=loss)
         folds, cv_method = None, ''
         if args.cross_validate and args.cv_iterations == 0:
@@ -229,7 +230,7 @@ def _without_seat_line(strikes: list[RealStrike]) -> str:
             + (f'; no seat, at the contact angle: {", ".join(missing)}' if missing else ''))
 
 
-def _per_day_starts(scenes, strikes, params, per_day, weights, mapper):
+def _per_day_starts(scenes, strikes, params, per_day, weights, mapper, at_seat=False):
     """Start values: the scenes' for the robot's parameters; for each day's own parameters,
     that day's fit with the scene held (mantis day-state), so that the joint fit starts near
     the days' states rather than at the scene's value for all of them."""
@@ -239,7 +240,8 @@ def _per_day_starts(scenes, strikes, params, per_day, weights, mapper):
     own = {}
     for param in per_day:
         _log(f'identify: each day\'s {param.label} from its strikes, to start from')
-        for state in ds.DayStateFit(scenes, strikes, param, weights, mapper).fit(3, log=_log):
+        for state in ds.DayStateFit(scenes, strikes, param, weights, mapper,
+                                    at_seat=at_seat).fit(3, log=_log):
             own[(param.key, state.group, state.day)] = state.value
     return [own.get((p.key, p.groups[0], p.day)) if p.day is not None
             else ident.default_value(scenes, p) for p in params]
@@ -256,6 +258,7 @@ def _identify_report(fit, folds, written) -> dict:
         'not_struck': [{'trial': m.trial, 'status': m.status, 'reason': m.reason}
                        for m in fit.simulated if m.status != 'strike'],
         'evaluations': fit.evaluations, 'wall_s': fit.wall_s, 'scenes': written,
+        'at_seat': fit.at_seat,
     }
     if folds:
         report['cross_validated_errors'] = ident.error_summary(
@@ -275,6 +278,8 @@ def _identify_text(report: dict) -> str:
     for pair in report['inseparable']:
         lines.append(f'the data cannot separate {pair["a"]} and {pair["b"]} (correlation '
                      f'{pair["correlation"]:+.2f})')
+    if report['at_seat']:
+        lines.append('fitted with each arm latched at its tracked seat (--at-seat)')
     lines.append('median |error|, fitted           strikes  tip speed  spring energy')
     lines += _error_lines(report['fitted_errors'])
     if 'cross_validated_errors' in report:

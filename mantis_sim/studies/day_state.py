@@ -28,7 +28,7 @@ import numpy as np
 from mantis_sim.model import kinetic_lever
 from mantis_sim.scene import Scene
 
-from .fidelity import LATCH_KEY, SimulatedStrike, error_rows, group_summary
+from .fidelity import LATCH_KEY, SimulatedStrike, error_rows, group_summary, seat_values
 from .identify import FreeParameter, Weights, scene_value, simulate_task, strike_residuals
 from .strikes import RealStrike
 
@@ -76,13 +76,15 @@ def day_scene(scene: Scene, key: str, value: float, hold_braking: bool = True) -
 
 class DayStateFit:
     """Fits ``param`` per (group, recording day) with the scenes otherwise held; simulations
-    go through ``mapper`` (mapper(function, tasks) -> results in order)."""
+    go through ``mapper`` (mapper(function, tasks) -> results in order). With ``at_seat``
+    each strike's arm is latched at its tracked seat (fidelity.seat_values), as
+    identify.StrikeModel does."""
 
     def __init__(self, scenes: dict[str, Scene], strikes: list[RealStrike],
                  param: FreeParameter, weights: Weights, mapper: Callable,
-                 hold_braking: bool = True):
+                 hold_braking: bool = True, at_seat: bool = False):
         self.scenes, self.param, self.weights, self.mapper = scenes, param, weights, mapper
-        self.hold_braking = hold_braking
+        self.hold_braking, self.at_seat = hold_braking, at_seat
         self.strikes = [s for s in strikes if s.recording_day and param.applies_to(s.group)
                         and s.group in scenes]
         # from the scene's value, within the bounds asked for
@@ -91,7 +93,8 @@ class DayStateFit:
 
     def _simulate(self, pairs: list[tuple[RealStrike, float]]) -> list[SimulatedStrike]:
         tasks = [(self.scenes[s.group], s, s.series is not None,
-                  day_values(self.scenes[s.group], self.param.key, v, self.hold_braking))
+                  {**(seat_values(s) if self.at_seat else {}),
+                   **day_values(self.scenes[s.group], self.param.key, v, self.hold_braking)})
                  for s, v in pairs]
         return self.mapper(simulate_task, tasks)
 

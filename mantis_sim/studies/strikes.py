@@ -264,7 +264,8 @@ def attach_processed_records(strikes: list[RealStrike], folder: Path,
 
 def read_strikes(table: Path, processed: Optional[Path] = None) -> list[RealStrike]:
     """The strikes of a summary table, each with its processed record from the folder
-    ``processed`` where it has one (timed by the table's t_z1_s)."""
+    ``processed`` where it has one (timed by the table's t_z1_s), and the arm's seat read
+    there at the table's t_oc_s where the table gives no seat_deg."""
     strikes = read_summary_table(table)
     if processed is None:
         return strikes
@@ -286,7 +287,8 @@ def record_times(path: Path, column: str) -> dict[str, float]:
     out = {}
     for number, row in enumerate(rows, start=2):
         if (row.get(column) or '').strip():
-            out[row['trial'].strip()] = _number(row[column], f'{path} row {number}', column, True)
+            trial = (row.get('trial') or '').strip()
+            out[trial] = _number(row[column], f'{path} row {number} ({trial})', column, True)
     return out
 
 
