@@ -23,7 +23,7 @@ from mantis_rig.recording import BagReader, BagWriter
 from mantis_rig.recording.interfaces import message_class
 from mantis_rig.recording.qos import parse_offered_qos_string
 from mantis_rig.replay import BagPlayer, PlaybackClock, ReplayError, replay_qos
-from mantis_rig.replay.schedule import REALTIME_PRIORITY, sleep_until
+from mantis_rig.replay.schedule import REALTIME_PRIORITY, TimingStats, sleep_until
 from mantis_rig.replay.synthetic import write_synthetic_trial
 
 REPO = Path(__file__).resolve().parents[2]
@@ -229,8 +229,13 @@ def test_replay_rate_and_clock(trial_bag, ros_context):
         recorder.close()
     stats = report.stats
     assert report.published == {resolve(JOINT_STATE): 200, resolve(SUPERVISOR_STATE): 5}
-    assert stats.achieved_rate == pytest.approx(4.0, rel=0.01)
-    # player and recorder share this process's GIL here: only the typical lateness is tight
+    # The pace: the publications fall due at 4x the log's pace, none goes out early, and
+    # typically within a millisecond of its due time. The end-to-end rate (achieved_rate) is
+    # not pinned: player and recorder share this process's GIL, and one late last message on
+    # a busy machine moves it by a percent of this half-second playback.
+    due_span_s = stats.wall_span_s - stats.lateness_s[-1]
+    assert stats.log_span_s / due_span_s == pytest.approx(4.0, rel=1e-6)
+    assert min(stats.lateness_s) >= 0.0
     assert np.median(stats.lateness_s) < 1e-3
     original = original_messages(trial_bag)
     first_ns = min(t for topic, _, t in original if topic in report.published)
@@ -323,6 +328,15 @@ def test_replay_qos_from_offered_profiles():
     assert replay_qos(resolve(SUPERVISOR_STATE), [reliable]).durability == \
         DurabilityPolicy.TRANSIENT_LOCAL
     assert replay_qos('/f', [reliable]).depth >= 100  # bursts are not cut by keep-last
+
+
+def test_the_achieved_rate_counts_a_late_start_and_a_late_end():
+    stats = TimingStats()
+    stats.record(0, due_s=10.0, actual_s=10.5)              # started late: not faster for it
+    stats.record(1_000_000_000, due_s=10.25, actual_s=10.5)
+    stats.record(2_000_000_000, due_s=10.5, actual_s=11.0)  # the last half a second late
+    assert stats.log_span_s == 2.0 and stats.wall_span_s == 1.0
+    assert stats.achieved_rate == 2.0 and stats.lateness_s == [0.5, 0.25, 0.5]
 
 
 def test_playback_clock_and_sleep_until():
