@@ -28,8 +28,15 @@ import numpy as np
 from mantis_sim.model import kinetic_lever
 from mantis_sim.scene import Scene
 
-from .fidelity import LATCH_KEY, SimulatedStrike, error_rows, group_summary, seat_values
-from .identify import FreeParameter, Weights, scene_value, simulate_task, strike_residuals
+from .fidelity import LATCH_KEY, SimulatedStrike, error_rows, group_summary
+from .identify import (
+    FreeParameter,
+    Weights,
+    scene_value,
+    simulate_task,
+    strike_residuals,
+    task_values,
+)
 from .strikes import RealStrike
 
 HOLD_KEY = 'hinge.friction_lever_mm'
@@ -93,8 +100,8 @@ class DayStateFit:
 
     def _simulate(self, pairs: list[tuple[RealStrike, float]]) -> list[SimulatedStrike]:
         tasks = [(self.scenes[s.group], s, s.series is not None,
-                  {**(seat_values(s) if self.at_seat else {}),
-                   **day_values(self.scenes[s.group], self.param.key, v, self.hold_braking)})
+                  task_values(s, day_values(self.scenes[s.group], self.param.key, v,
+                                            self.hold_braking), self.at_seat))
                  for s, v in pairs]
         return self.mapper(simulate_task, tasks)
 

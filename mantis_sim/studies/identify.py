@@ -272,6 +272,12 @@ def values_for_strike(params: Sequence[FreeParameter], values, strike: RealStrik
     return {p.key: float(v) for p, v in zip(params, values) if p.applies_to_strike(strike)}
 
 
+def task_values(strike: RealStrike, values: dict, at_seat: bool) -> dict:
+    """What a simulation of the strike sets beside its conditions: ``values`` (a fit's, a
+    day's), over the strike's tracked seat where ``at_seat`` (fidelity.seat_values)."""
+    return {**(seat_values(strike) if at_seat else {}), **values}
+
+
 def strike_residuals(strike: RealStrike, sim: SimulatedStrike, weights: Weights) -> np.ndarray:
     """This strike's residuals (module docstring); a fixed count per strike."""
     summary = ((strike.peak_tip_speed_mps, sim.peak_tip_speed_mps, weights.tip_speed),
@@ -337,8 +343,8 @@ class StrikeModel:
         tasks = []
         for values in value_sets:
             tasks.extend((self.scenes[s.group], s, s.series is not None,
-                          {**(seat_values(s) if self.at_seat else {}),
-                           **values_for_strike(self.params, values, s)})
+                          task_values(s, values_for_strike(self.params, values, s),
+                                      self.at_seat))
                          for s in self.strikes)
         results = self.mapper(simulate_task, tasks)
         self.evaluations += len(value_sets)
@@ -531,7 +537,7 @@ def cross_validate(model: StrikeModel, fitted: np.ndarray, max_iterations: int =
 __all__ = ['CORRELATION_WARNING', 'FoldResult', 'FreeParameter', 'Identification',
            'IdentificationError', 'Loss', 'StrikeModel', 'Weights', 'cross_validate',
            'cross_validate_one_step', 'default_value', 'identify', 'scene_value', 'simulate_task',
-           'parse_free_parameter', 'per_day_parameters', 'strike_residuals',
+           'parse_free_parameter', 'per_day_parameters', 'strike_residuals', 'task_values',
            'values_for_strike']
 
 
