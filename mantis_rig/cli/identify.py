@@ -190,7 +190,7 @@ def run_identify(args) -> int:
         _log(f'identify: {len(strikes)} strikes ({", ".join(sorted(scenes))}), '
              f'{len(params)} parameters, on {mapper.where} ({mapper.worker_count} worker(s))')
         if args.at_seat:
-            _log(_without_seat_line(strikes))
+            _log(_seat_line(_seats(strikes)))
         model = ident.StrikeModel(scenes, strikes, params, weights, mapper,
                                   at_seat=args.at_seat)
         start = _per_day_starts(scenes, strikes, params, per_day, weights, mapper,
@@ -224,10 +224,16 @@ def run_identify(args) -> int:
     return 0
 
 
-def _without_seat_line(strikes: list[RealStrike]) -> str:
+def _seats(strikes: list[RealStrike]) -> dict:
+    """How many strikes have a tracked seat, and which have none."""
     missing = [s.trial for s in strikes if s.seat_deg is None]
-    return (f'arms latched at their tracked seats ({len(strikes) - len(missing)} strikes)'
-            + (f'; no seat, at the contact angle: {", ".join(missing)}' if missing else ''))
+    return {'seated': len(strikes) - len(missing), 'without_seat': missing}
+
+
+def _seat_line(seats: dict) -> str:
+    return (f'arms latched at their tracked seats ({seats["seated"]} strikes)'
+            + (f'; no seat, at the contact angle: {", ".join(seats["without_seat"])}'
+               if seats['without_seat'] else ''))
 
 
 def _per_day_starts(scenes, strikes, params, per_day, weights, mapper, at_seat=False):
@@ -331,10 +337,7 @@ def run_compare(args) -> int:
               'effects': fidelity.effect_slopes(rows),
               'not_struck': [{'trial': r['trial'], 'status': r['status'], 'reason': r['reason']}
                              for r in rows if r['status'] != 'strike'],
-              'at_seat': args.at_seat,
-              'without_seat': [s.trial for s in strikes if s.seat_deg is None]
-              if args.at_seat else [],
-              'at_seat_line': _without_seat_line(strikes) if args.at_seat else '',
+              'at_seat': _seats(strikes) if args.at_seat else None,
               'outputs': sorted(str(p) for p in args.out.iterdir())}
     if args.json:
         print(json.dumps(json_safe(report)))
@@ -365,6 +368,6 @@ def _compare_text(report: dict) -> str:
     for r in report['not_struck']:
         lines.append(f'{r["status"]}: {r["trial"]}: {r["reason"]}')
     if report['at_seat']:
-        lines.append(report['at_seat_line'])
+        lines.append(_seat_line(report['at_seat']))
     lines.append('outputs: ' + ', '.join(report['outputs']))
     return '\n'.join(lines)
