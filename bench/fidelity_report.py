@@ -140,20 +140,10 @@ def day_states(scenes, strikes, mapper, key_spec: str,
                                  hold_braking=hold_braking)
 
 
-def tracked_arm_at_overcentering(data: Path) -> dict[str, float]:
-    """trial -> the arm's angle (degrees, the authors' processed theta2) at the lab's
-    overcentering, for strikes whose overcentering lies within the recording."""
-    out = {}
-    with open(data / 'authors_summary_train.csv', newline='', encoding='utf-8') as f:
-        for r in csv.DictReader(f):
-            if 'recording star' not in r['notes']:
-                out[r['trial']] = _angles_at(data, r['trial'], float(r['t_oc_s']))[1]
-    return out
-
-
-def day_states_table(latched, holds, strikes, tracked) -> tuple[list[str], str]:
+def day_states_table(latched, holds, strikes) -> tuple[list[str], str]:
     """Each day's own latched angle and hold, beside the arm angle its tracks show at
-    overcentering; and how the fitted angle follows the tracked one across the days."""
+    overcentering (the strikes' seats); and how the fitted angle follows the tracked one across
+    the days."""
     hold = {(s.group, s.day): s for s in holds}
     lines = ['| group | recording day | strikes | own latched angle (deg) | its offset from the '
              'recorded contact angle | arm angle tracked at overcentering (deg) | own hold (mm) |',
@@ -162,7 +152,7 @@ def day_states_table(latched, holds, strikes, tracked) -> tuple[list[str], str]:
     for s in latched:
         day = [k for k in strikes if (k.group, k.recording_day) == (s.group, s.day)]
         angle = float(np.mean([k.contact_angle_deg for k in day])) + s.value
-        seen = [tracked[k.trial] for k in day if k.trial in tracked]
+        seen = [k.seat_deg for k in day if k.seat_deg is not None]
         arm = float(np.mean(seen)) if seen else math.nan
         if seen:
             pairs.append((angle, arm))
@@ -608,8 +598,7 @@ def main() -> int:
                       if p.get('cross_validation_by_day')), {})
     not_struck = [r for r in rows_now if r['status'] != 'strike']
     seat_lines, seat_text = seat_table(args.data, shipped['air_23mm'], reference['air_23mm'])
-    days_table, latch_follows = day_states_table(own_latched, own_holds, strikes,
-                                                 tracked_arm_at_overcentering(args.data))
+    days_table, latch_follows = day_states_table(own_latched, own_holds, strikes)
     ratio = provenance['air_23mm']['parameters']['hinge.kinetic_friction_ratio']
     speed = fidelity.group_summary(rows_now, 'peak_tip_speed_mps')
     text = TEMPLATE.format(
