@@ -157,7 +157,7 @@ def test_damaged_processed_records_are_refused(tmp_path):
 @given(cut=st.integers(0, 3000), flips=st.lists(st.tuples(st.integers(0, 2999),
                                                           st.integers(1, 255)), max_size=8))
 def test_a_summary_table_damaged_anyhow_is_read_or_refused(tmp_path, cut, flips):
-    content = bytearray(data_file(TABLE).read_bytes()[:cut or None])
+    content = bytearray(_table_with_seats()[:cut or None])
     for position, mask in flips:
         if position < len(content):
             content[position] ^= mask
@@ -170,11 +170,30 @@ def test_a_summary_table_damaged_anyhow_is_read_or_refused(tmp_path, cut, flips)
     for s in strikes:
         assert s.medium in ('air', 'water') and 0 <= s.contact_angle_deg <= 15
         assert math.isfinite(s.pull_mm_per_s) and s.pull_mm_per_s > 0
+        assert s.seat_deg is None or -5 <= s.seat_deg <= 30
+    # the record times read beside the table (phase IV, overcentering): numbers or refused
+    for column in ('t_z1_s', 't_oc_s'):
+        try:
+            times = record_times(path, column)
+        except StrikeDataError:
+            continue
+        assert all(math.isfinite(t) for t in times.values())
 
 
-def test_the_undamaged_table_is_read_by_the_fuzzed_reader():
+def _table_with_seats() -> bytes:
+    """The training table with a seat_deg column (4.5 degrees on every row)."""
+    lines = data_file(TABLE).read_text().splitlines()
+    return '\n'.join([lines[0] + ',seat_deg'] + [line + ',4.5' for line in lines[1:]]).encode()
+
+
+def test_the_undamaged_table_is_read_by_the_fuzzed_reader(tmp_path):
     """The property above is not vacuous: the table it damages is read whole when intact."""
     assert len(read_summary_table(data_file(TABLE))) == 32
+    path = tmp_path / 'seated.csv'
+    path.write_bytes(_table_with_seats())
+    strikes = read_summary_table(path)
+    assert len(strikes) == 32 and {s.seat_deg for s in strikes} == {4.5}
+    assert len(record_times(path, 't_oc_s')) == 32
 
 
 # --- statistics ----------------------------------------------------------------------------------
