@@ -3,7 +3,10 @@
 One background I/O thread owns the reading side of the port: it decodes every message,
 keeps the latest status, sends MOT_ACK_USTATUSUPDATE about once a second (without it the
 controller stops sending status updates), and enforces the travel limits during motion by
-stopping the stage. Commands are written from the caller's thread and wait, with a timeout,
+stopping the stage. A controller that does not stream status after HW_START_UPDATEMSGS (some
+KDC101s do not) is polled instead: the I/O thread sends MOT_REQ_DCSTATUSUPDATE at
+`poll_rate_hz` (`status_mode` says which). Either way a status older than `status_timeout_s`
+ends the link. Commands are written from the caller's thread and wait, with a timeout,
 for the reply the I/O thread records. Any broken link (timeout, garbled or truncated bytes,
 vanished port) ends in a DeviceError, a closed port and a stopped I/O thread.
 """
@@ -46,6 +49,9 @@ HEADER_BYTES = 6
 MAX_DATA_BYTES = 255       # APT spec: no data packet exceeds 255 bytes
 READ_POLL_S = 0.05
 DEFAULT_HOMING_SPEED_M_PER_S = 2.0e-3   # (capped by the limits) set before every homing
+DEFAULT_POLL_RATE_HZ = 10.0             # the rate a streaming controller sends status at
+DEFAULT_STREAM_WAIT_S = 0.5             # (at most a third of status_timeout_s) see open()
+STREAMING, POLLING = 'streaming', 'polling'
 
 # thorlabs_apt_protocol calls the DC servo status messages MOT_*_DCSTATUSUPDATE (0x0490-0x0492);
 # newer editions of the APT document name the same ids MOT_*_USTATUSUPDATE.
@@ -97,7 +103,12 @@ class Kdc101Stage(Stage):
                  reply_timeout_s: float = 1.0, stop_timeout_s: float = 2.0,
                  status_timeout_s: float = 1.5, frame_timeout_s: float = 0.5,
                  keepalive_period_s: float = 1.0, expected_model: Optional[str] = 'KDC101',
-                 homing_speed_m_per_s: Optional[float] = None):
+                 homing_speed_m_per_s: Optional[float] = None,
+                 poll_rate_hz: float = DEFAULT_POLL_RATE_HZ,
+                 stream_wait_s: Optional[float] = None):
+        """stream_wait_s: how long open() waits, after the first status, for a second one the
+        controller sends by itself before it polls instead (default the smaller of 0.5 s and a
+        third of status_timeout_s); poll_rate_hz: the rate of MOT_REQ_DCSTATUSUPDATE then."""
         self.port_path = port
         self.scale = AptScale(counts_per_mm, velocity_per_mm_s, acceleration_per_mm_s2,
                               status_velocity_per_mm_s)
@@ -109,6 +120,19 @@ class Kdc101Stage(Stage):
                             ('keepalive_period_s', keepalive_period_s)):
             if not (value > 0 and math.isfinite(value)):
                 raise ConfigurationError(f'{name} {value!r} s must be finite and > 0 s')
+        if not (poll_rate_hz > 0 and math.isfinite(poll_rate_hz)):
+            raise ConfigurationError(f'poll_rate_hz {poll_rate_hz!r} Hz must be finite and '
+                                     f'> 0 Hz')
+        if 1.0 / poll_rate_hz > status_timeout_s / 2:
+            raise ConfigurationError(
+                f'poll_rate_hz {poll_rate_hz:g} Hz is too slow for status_timeout_s '
+                f'{status_timeout_s:g} s: polls must come at least twice within it')
+        if stream_wait_s is None:
+            stream_wait_s = min(DEFAULT_STREAM_WAIT_S, status_timeout_s / 3)
+        if not (stream_wait_s > 0 and stream_wait_s <= status_timeout_s / 2):
+            raise ConfigurationError(
+                f'stream_wait_s {stream_wait_s!r} s must be > 0 s and at most half of '
+                f'status_timeout_s {status_timeout_s:g} s')
         if homing_speed_m_per_s is None:
             homing_speed_m_per_s = min(DEFAULT_HOMING_SPEED_M_PER_S, self.limits.max_speed_m_per_s)
         self.limits.check_speed(homing_speed_m_per_s)
@@ -121,6 +145,8 @@ class Kdc101Stage(Stage):
         self.status_timeout_s = status_timeout_s
         self.frame_timeout_s = frame_timeout_s
         self.keepalive_period_s = keepalive_period_s
+        self.poll_rate_hz = poll_rate_hz
+        self.stream_wait_s = stream_wait_s
         self.expected_model = expected_model
         self._port: Optional[serial.Serial] = None
         self._thread: Optional[threading.Thread] = None
@@ -137,7 +163,9 @@ class Kdc101Stage(Stage):
         self._status_time = 0.0
         self._stop_pending = False      # a MOT_MOVE_STOP whose MOT_MOVE_STOPPED is still due
         self._last_ack = 0.0
+        self._last_poll = 0.0
         self._updates_on = False
+        self._status_mode: Optional[str] = None
         self._motion: Optional[_Motion] = None
         self._trip: Optional[SafetyLimitError] = None
         self._fault_text: Optional[str] = None
@@ -177,10 +205,43 @@ class Kdc101Stage(Stage):
             self._send(apt.hw_start_updatemsgs(CONTROLLER, HOST))
             self._send(apt.mot_req_dcstatusupdate(CONTROLLER, HOST, CHANNEL))
             self._wait_for(lambda m: m.msg == STATUS, seq, self.reply_timeout_s,
-                           'status update after HW_START_UPDATEMSGS')
+                           'status update (neither streamed after HW_START_UPDATEMSGS nor '
+                           'in reply to MOT_REQ_DCSTATUSUPDATE)')
+            self._choose_status_mode(seq)
         except BaseException:
             self.close()
             raise
+
+    @property
+    def status_mode(self) -> Optional[str]:
+        """'streaming': the controller sends status updates by itself (HW_START_UPDATEMSGS);
+        'polling': it does not, and the I/O thread requests one (MOT_REQ_DCSTATUSUPDATE) at
+        `poll_rate_hz`. None until open() has found out."""
+        return self._status_mode
+
+    def _choose_status_mode(self, since_seq: int) -> None:
+        """One status came (the reply to open()'s request, or a streamed one). A streaming
+        controller sends another by itself within `stream_wait_s`; otherwise poll."""
+        deadline = time.monotonic() + self.stream_wait_s
+        with self._cond:
+            while self._failure is None:
+                statuses = sum(1 for seq, msg in self._events
+                               if seq > since_seq and msg.msg == STATUS)
+                if statuses >= 2:
+                    self._status_mode = STREAMING
+                    return
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    self._status_mode, self._last_poll = POLLING, 0.0
+                    break
+                self._cond.wait(min(remaining, 0.1))
+            failure = self._failure
+        if failure is not None:
+            self._shutdown()
+            raise type(failure)(str(failure))
+        log.info('KDC101 on %s sent no status update by itself within %g s of '
+                 'HW_START_UPDATEMSGS: polling it with MOT_REQ_DCSTATUSUPDATE at %g Hz',
+                 self.port_path, self.stream_wait_s, self.poll_rate_hz)
 
     def close(self) -> None:
         if self._port is None and self._thread is None:
@@ -532,8 +593,9 @@ class Kdc101Stage(Stage):
 
     def _housekeeping(self) -> None:
         with self._cond:
-            updates_on, last_ack, status_time = (self._updates_on, self._last_ack,
-                                                 self._status_time)
+            updates_on, last_ack, status_time, mode, last_poll = (
+                self._updates_on, self._last_ack, self._status_time, self._status_mode,
+                self._last_poll)
         if not updates_on:
             return
         now = time.monotonic()
@@ -541,10 +603,16 @@ class Kdc101Stage(Stage):
             self._write(apt.mot_ack_dcstatusupdate(CONTROLLER, HOST))
             with self._cond:
                 self._last_ack = now
+        if mode == POLLING and now - last_poll >= 1.0 / self.poll_rate_hz:
+            self._write(apt.mot_req_dcstatusupdate(CONTROLLER, HOST, CHANNEL))
+            with self._cond:
+                self._last_poll = now
         if now - status_time > self.status_timeout_s:
+            polled = (f', although polled with MOT_REQ_DCSTATUSUPDATE at '
+                      f'{self.poll_rate_hz:g} Hz' if mode == POLLING else '')
             raise DeviceError(f'no status update from the KDC101 on {self.port_path} for '
-                              f'{now - status_time:.1f} s (limit {self.status_timeout_s:g} s); '
-                              f'port closed')
+                              f'{now - status_time:.1f} s (limit {self.status_timeout_s:g} s)'
+                              f'{polled}; port closed')
 
     def _read_message(self, first: bytes):
         deadline = time.monotonic() + self.frame_timeout_s

@@ -8,6 +8,10 @@ MOT_ACK_USTATUSUPDATE for `ack_timeout_s`. Replies are built with struct per the
 thorlabs_apt_protocol only decodes controller-to-host messages, so host messages are
 decoded here with struct as well.
 
+Some KDC101s do not stream status after HW_START_UPDATEMSGS and only answer
+MOT_REQ_USTATUSUPDATE: `streams_status=False` emulates them (`answers_status_requests=False`
+as well: a controller that gives status neither way).
+
 Fault injection: mute(), garble_next(), truncate_next(), shorten_next(), limit_switch_at(),
 vanish().
 """
@@ -58,12 +62,18 @@ class Kdc101Emulator:
                  homed: bool = False, travel_mm: float = 25.0, home_speed_mm_s: float = 20.0,
                  status_period_s: float = 0.1, ack_timeout_s: float = 3.0,
                  serial_number: int = 27000123, model: bytes = b'KDC101',
-                 firmware: tuple = (3, 0, 10), stage_part: Optional[bytes] = b'MTS25-Z8'):
+                 firmware: tuple = (3, 0, 10), stage_part: Optional[bytes] = b'MTS25-Z8',
+                 streams_status: bool = True, answers_status_requests: bool = True):
         """stage_part: the stage the controller reports in MOT_GET_STAGEAXISPARAMS (with
-        travel_mm and counts_per_mm); None: the request is not answered."""
+        travel_mm and counts_per_mm); None: the request is not answered.
+        streams_status: False ignores HW_START_UPDATEMSGS (no periodic status updates);
+        answers_status_requests: False leaves MOT_REQ_USTATUSUPDATE unanswered. End-of-move
+        messages (MOT_MOVE_COMPLETED, MOT_MOVE_STOPPED) carry their status either way."""
         self.counts_per_mm = counts_per_mm
         self.status_period_s = status_period_s
         self.ack_timeout_s = ack_timeout_s
+        self.streams_status = streams_status
+        self.answers_status_requests = answers_status_requests
         self._serial_number, self._model, self._firmware = serial_number, model, firmware
         self._stage_part, self._travel_mm = stage_part, travel_mm
         # the controller's stored homing parameters (reverse, reverse switch, 0.1 mm offset);
@@ -83,7 +93,8 @@ class Kdc101Emulator:
         self.velparams = {'min_velocity': 0, 'acceleration': 0, 'max_velocity': 0}
         self.received: list = []       # message ids from the host, in order
         self.acks_received = 0
-        self.status_sent = 0
+        self.status_sent = 0              # periodic status updates
+        self.status_requests_answered = 0
         self._updates_on = False
         self._last_ack = self._last_status = 0.0
         self._mute = False
@@ -260,14 +271,17 @@ class Kdc101Emulator:
                                16, minor, interim, major, 0, bytes(60), 1, 0, 1)
             self._send(long_message(HW_GET_INFO, data))
         elif msgid == HW_START_UPDATEMSGS:
-            self._updates_on, self._last_ack = True, now
+            if self.streams_status:
+                self._updates_on, self._last_ack = True, now
         elif msgid == HW_STOP_UPDATEMSGS:
             self._updates_on = False
         elif msgid == MOT_ACK_USTATUSUPDATE:
             self._last_ack = now
             self.acks_received += 1
         elif msgid == MOT_REQ_USTATUSUPDATE:
-            self._send(long_message(MOT_GET_USTATUSUPDATE, self._status_data()))
+            if self.answers_status_requests:
+                self.status_requests_answered += 1
+                self._send(long_message(MOT_GET_USTATUSUPDATE, self._status_data()))
         elif msgid == MOD_SET_CHANENABLESTATE:
             self._enabled = param2 == 1
         elif msgid == MOT_SET_VELPARAMS:

@@ -1,4 +1,5 @@
 """The real KDC101 stage backend against an emulated KDC101 on a pseudo-terminal."""
+import logging
 import re
 import threading
 import time
@@ -241,6 +242,111 @@ def test_move_at_zero_stops_and_stop_is_harmless_when_stopped(make_emulator, mak
     assert wait_until(lambda: emu.moving, 2.0)
     stage.move_at(0.0)
     assert not emu.moving
+
+
+# --- status: streamed, or polled when the controller does not stream -------------------------
+
+POLL_LOG = 'polling it with MOT_REQ_DCSTATUSUPDATE at 10 Hz'
+
+
+def polling_log_lines(caplog):
+    return [r for r in caplog.records if r.name == 'mantis_rig.hardware.kdc101'
+            and POLL_LOG in r.getMessage()]
+
+
+def test_a_streaming_controller_is_not_polled(make_emulator, make_stage, caplog):
+    emu = make_emulator(position_mm=4.0)
+    with caplog.at_level(logging.INFO, logger='mantis_rig.hardware.kdc101'):
+        stage = make_stage(emu.port)
+    assert stage.status_mode == 'streaming'
+    assert emu.status_requests_answered == 1          # open()'s one request, no polls
+    assert polling_log_lines(caplog) == []
+
+
+def test_a_controller_that_does_not_stream_is_polled(make_emulator, make_stage, caplog):
+    emu = make_emulator(position_mm=10.0, homed=True, streams_status=False)
+    with caplog.at_level(logging.INFO, logger='mantis_rig.hardware.kdc101'):
+        stage = make_stage(emu.port)           # status_timeout_s 1.5 s
+    assert stage.status_mode == 'polling'
+    (line,) = polling_log_lines(caplog)
+    assert line.levelno == logging.INFO and emu.port in line.getMessage()
+    assert not emu.sending_status
+    # 20 polls answered (2 s at 10 Hz, past the 1.5 s status limit) and the link holds
+    answered = emu.status_requests_answered
+    assert wait_until(lambda: emu.status_requests_answered >= answered + 20, 20.0)
+    assert stage.state().position_m == pytest.approx(10 * MM, abs=1e-7)
+    assert stage._failure is None
+
+    stage.move_at(2 * MM)                      # positions follow the move, from polls alone
+    assert wait_until(lambda: stage.state().position_m > 10.2 * MM)
+    assert stage.state().moving
+    stage.stop()
+    assert not emu.moving
+    assert wait_until(lambda: not stage.state().moving
+                      and abs(stage.state().position_m / MM - emu.position_mm) < 1e-4)
+    stage.move_to(11 * MM, 2.4 * MM, timeout_s=10.0)
+    assert emu.position_mm == pytest.approx(11.0, abs=1e-4)
+    assert wait_until(lambda: abs(stage.state().position_m - 11 * MM) < 1e-7)
+    assert stage.status_mode == 'polling' and len(polling_log_lines(caplog)) == 1
+
+
+def test_a_polled_controller_that_stops_answering_ends_the_link(make_emulator, make_stage):
+    emu = make_emulator(position_mm=10.0, homed=True, streams_status=False)
+    stage = make_stage(emu.port)
+    assert stage.status_mode == 'polling'
+    emu.answers_status_requests = False
+    assert wait_until(lambda: stage._failure is not None, 10.0)
+    with pytest.raises(DeviceError, match=r'no status update from the KDC101 on .* for '
+                                          r'\d+\.\d s \(limit 1\.5 s\), although polled with '
+                                          r'MOT_REQ_DCSTATUSUPDATE at 10 Hz; port closed'):
+        stage.state()
+    assert_link_closed(stage, emu)
+
+
+def test_a_controller_that_gives_status_neither_way_fails_at_open(make_emulator, make_stage):
+    emu = make_emulator(streams_status=False, answers_status_requests=False)
+    stage = make_stage(emu.port, open_=False, status_timeout_s=10.0)
+    with pytest.raises(DeviceError, match=r'no status update \(neither streamed after '
+                                          r'HW_START_UPDATEMSGS nor in reply to '
+                                          r'MOT_REQ_DCSTATUSUPDATE\) from the KDC101 on .* '
+                                          r'within 1 s; port closed'):
+        stage.open()
+    assert_link_closed(stage, emu)
+    assert stage.status_mode is None
+
+
+@pytest.mark.parametrize('kwargs, pattern', [
+    (dict(poll_rate_hz=0.0), r'poll_rate_hz 0\.0 Hz must be finite and > 0 Hz'),
+    (dict(poll_rate_hz=1.0), r'poll_rate_hz 1 Hz is too slow for status_timeout_s 1\.5 s'),
+    (dict(stream_wait_s=1.0), r'stream_wait_s 1\.0 s .* at most half of status_timeout_s'),
+])
+def test_bad_status_settings_are_refused(kwargs, pattern):
+    with pytest.raises(ConfigurationError, match=pattern):
+        Kdc101Stage('/dev/null', **kwargs)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('streams_status, mode', [(True, 'streaming'), (False, 'polling')])
+def test_a_trials_stage_sequence(make_emulator, make_stage, streams_status, mode):
+    """What a trial asks of the stage (trial/sequence.py through stage_node): home, move to the
+    start, pull at a velocity, stop, move back."""
+    emu = make_emulator(position_mm=1.0, streams_status=streams_status)
+    stage = make_stage(emu.port)
+    assert stage.status_mode == mode
+    stage.home(timeout_s=20.0)
+    assert stage.state().homed and emu.position_mm == pytest.approx(0.0, abs=1e-6)
+    stage.move_to(2 * MM, 2.4 * MM, timeout_s=10.0)
+    assert emu.position_mm == pytest.approx(2.0, abs=1e-4)
+    stage.move_at(1 * MM)
+    assert wait_until(lambda: stage.state().position_m > 2.3 * MM)
+    assert stage.state().moving and emu.moving
+    stage.stop()
+    assert not emu.moving and emu.position_mm > 2.3
+    stage.move_to(2 * MM, 2.4 * MM, timeout_s=10.0)
+    assert emu.position_mm == pytest.approx(2.0, abs=1e-4)
+    assert wait_until(lambda: abs(stage.state().position_m - 2 * MM) < 1e-7
+                      and not stage.state().moving)
+    assert stage._failure is None
 
 
 # --- configuration refused at call time -----------------------------------------------------
