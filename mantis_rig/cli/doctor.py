@@ -5,10 +5,11 @@ line: the ROS environment (domain, discovery range, middleware) and the free dis
 trials are written; the NI DAQ devices (hardware); the load cell (the channel exists on the
 device, 1 s at rest at the trial's rate: offset, noise, overruns, saturation); the camera
 trigger (the line or counter exists and a test pulse is written: nothing is wired back to see
-it arrive); the stage (which port and why, identity and firmware, the stage type and travel,
-the limits the software enforces); with --move only, the stage homes, moves to 0.1 mm inside
-the lower soft limit, jogs 1 mm at 0.5 mm/s and comes back there, guarded by the force ceiling
-fed from the load cell (without a working load cell it does not move).
+it arrive); the stage (which port and why, identity and firmware and how its status arrives:
+streamed, or polled because the controller does not stream; the stage type and travel, the
+limits the software enforces); with --move only, the stage homes, moves to 0.1 mm inside the
+lower soft limit, jogs 1 mm at 0.5 mm/s and comes back there, guarded by the force ceiling fed
+from the load cell (without a working load cell it does not move).
 
 `--backend sim` runs the same checks against the simulated rig's devices (a world of the
 params' scene in this process). Exit 0 when nothing FAILs, 1 otherwise; `--json` prints the
@@ -74,6 +75,7 @@ class Report:
     def __init__(self):
         self.checks: list[Check] = []
         self.moved = False
+        self.stage_status: Optional[str] = None     # the KDC101's status_mode, once open
 
     def add(self, name, status, found, fix='') -> Check:
         check = Check(name, status, found, fix)
@@ -112,7 +114,8 @@ def run(args) -> int:
     report = run_checks(options)
     if args.json:
         print(json.dumps({'backend': options.backend, 'params': options.params.source,
-                          'moved': report.moved, 'counts': report.counts(),
+                          'moved': report.moved, 'stage_status': report.stage_status,
+                          'counts': report.counts(),
                           'ok': not report.failed,
                           'checks': [asdict(c) for c in report.checks]}, indent=2))
     else:
@@ -556,8 +559,10 @@ def check_stage(report: Report, options: Options, rig, loadcell_ok: bool) -> Non
             message = _one_line(exc)
             report.add('stage: identity', FAIL, message, _port_fix(message, port))
             return
+        report.stage_status = getattr(stage, 'status_mode', None)
         report.add('stage: identity', OK, f'{info.model} #{info.serial_number}, firmware '
-                   f'{info.firmware}' + ('' if rig.sim else f', on {port}'))
+                   f'{info.firmware}' + ('' if rig.sim else f', on {port}')
+                   + _status_text(stage))
         if not _check_stage_type(report, stage, params, rig):
             return
         if not _check_stage_limits(report, stage, params):
@@ -570,6 +575,17 @@ def check_stage(report: Report, options: Options, rig, loadcell_ok: bool) -> Non
         except DeviceError as exc:
             report.add('stage: close', WARN, f'closing the stage: {_one_line(exc)}',
                        'power-cycle the KDC101 before the trial')
+
+
+def _status_text(stage) -> str:
+    """How the stage's status arrives ('' for a stage without status modes: the simulated)."""
+    mode = getattr(stage, 'status_mode', None)
+    if mode == 'streaming':
+        return '; status: streaming'
+    if mode == 'polling':
+        return (f'; status: polled at {stage.poll_rate_hz:g} Hz (the controller does not '
+                f'stream)')
+    return ''
 
 
 def _normalized(part: str) -> str:

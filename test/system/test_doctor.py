@@ -178,6 +178,8 @@ def test_a_healthy_rig_passes(tmp_path, ports, make_emulator, make_daq, capsys):
     found = {c['name']: c['found'] for c in out['checks']}
     assert 'the one controller with serial number 27000123' in found['stage: port']
     assert 'KDC101 #27000123, firmware 3.0.10' in found['stage: identity']
+    assert found['stage: identity'].endswith('; status: streaming')
+    assert out['stage_status'] == 'streaming'
     assert 'MTS25-Z8' in found['stage: type']
     assert 'force ceiling 30 N' in found['stage: limits']
     assert 'nothing is wired back' in found['camera trigger']
@@ -187,11 +189,31 @@ def test_a_healthy_rig_passes(tmp_path, ports, make_emulator, make_daq, capsys):
 
 
 MOVE_COMMANDS = {0x0443, 0x0453, 0x0457}     # MOT_MOVE_HOME, _ABSOLUTE, _VELOCITY
+POLLED = 'status: polled at 10 Hz (the controller does not stream)'
+
+
+def test_a_controller_that_does_not_stream_is_polled_and_said_so(tmp_path, ports,
+                                                                 make_emulator, make_daq,
+                                                                 capsys):
+    emu = make_emulator(streams_status=False)
+    ports[:] = [usb_port(emu.port, '27000123')]
+    make_daq()
+    params = str(rig_params(tmp_path, serial_number='27000123'))
+    assert main(['doctor', '--params', params]) == 0
+    (line,) = [ln for ln in capsys.readouterr().out.splitlines() if 'stage: identity' in ln]
+    assert line.startswith('OK') and line.endswith(POLLED), line
+    assert main(['doctor', '--params', params, '--json']) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out['stage_status'] == 'polling'
+    identity = next(c for c in out['checks'] if c['name'] == 'stage: identity')
+    assert identity['status'] == 'OK' and identity['found'].endswith(POLLED)
+    assert not emu.sending_status and emu.status_requests_answered > 2
 
 
 @pytest.mark.slow
-def test_move_homes_jogs_and_returns(tmp_path, ports, make_emulator, make_daq):
-    emu = make_emulator(position_mm=0.2)
+@pytest.mark.parametrize('streams_status', [True, False], ids=['streaming', 'polled'])
+def test_move_homes_jogs_and_returns(tmp_path, ports, make_emulator, make_daq, streams_status):
+    emu = make_emulator(position_mm=0.2, streams_status=streams_status)
     ports[:] = [usb_port(emu.port, '27000123')]
     make_daq()
     report, checks = run_doctor(rig_params(tmp_path, serial_number='auto'), move=True,
@@ -200,6 +222,7 @@ def test_move_homes_jogs_and_returns(tmp_path, ports, make_emulator, make_daq):
     motion = checks['stage: motion']
     assert motion.status == doctor.OK and 'homed at 0.000 mm -> 0.900 mm -> 0.600 mm' in \
         motion.found, motion.line()
+    assert report.stage_status == ('streaming' if streams_status else 'polling')
     assert emu.position_mm == pytest.approx(0.6, abs=1e-4) and not emu.moving
 
 
