@@ -17,6 +17,17 @@ stretches by its own stiffness (tendon.stiffness, also for a rigid-tendon scene)
 changes at the series stiffness of tendon and spring-through-linkage (about -0.6 N/mm for
 air_23mm: the linkage softens), not at the tendon's 50 N/mm; it never falls below zero.
 
+Re-latching: on the rig a person re-latches the robot between strikes, with the stage back
+where the tendon is slack. The world does the same: once the arm is held after a strike and the
+stage rests within RELATCH_TOLERANCE_MM of drive.start_position_mm, a new strike begins there,
+the robot in the scene's start pose again (or in the pose of the scene ``relatch_scene(n)``
+gives for the n-th strike, so that a simulated session may draw each robot). Each strike is
+simulated on its own clock from its re-latch; the world maps its times to the rig's. A World
+made with ``operator_relatches=False`` plays an operator who forgot: the robot is left
+unlatched, its arm free, and the tendon, which then only swings the free arm, carries no
+tension (a simplification: the free arm's own hinge stiffness and weight are left out) while the
+arm stays where the strike left it. The supervisor's latch check is tried against that.
+
 Stage moves to a position (move_stage_to) are executed by the world, as the KDC101 executes
 MOT_MOVE_ABSOLUTE: a trapezoidal profile that ends at rest exactly on the target.
 
@@ -24,6 +35,7 @@ Units at this interface are SI (s, m, N); inside, mantis_sim's g, mm, ms.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 import math
 
 import numpy as np
@@ -38,6 +50,8 @@ from .scene import Scene
 TENSION_GRID_MS = 2.5
 DEFAULT_HISTORY_S = 2.0
 SETTLE_AFTER_PEAK_MS = 20.0
+# The stage counts as back at its start (the robot can be re-latched) this close to it.
+RELATCH_TOLERANCE_MM = 0.01
 
 # Where the markers sit: (across, along) mm in the body frame (along = a->b), and in the arm
 # frame (across, along the arm axis from b towards the tip). Like the real rig's five markers.
@@ -49,19 +63,17 @@ CAMERA_ORIGIN_MM = (-4.0, 9.0)
 
 
 class World:
-    def __init__(self, scene: Scene, history_s: float = DEFAULT_HISTORY_S):
+    def __init__(self, scene: Scene, history_s: float = DEFAULT_HISTORY_S,
+                 relatch_scene: Callable[[int], Scene] | None = None,
+                 operator_relatches: bool = True):
         self.scene = scene
+        self.operator_relatches = operator_relatches
         self.history_s = history_s
-        self._sim = HybridSimulator(scene, dense=True)
+        self._relatch_scene = relatch_scene or (lambda n: scene)
         self._drive = CommandedPull(scene.drive.acceleration_mm_per_s2 * 1e-6)
-        self._sim.model.drive = self._drive
-        self._sim.start()
-        self._sim.stop_at = math.inf         # the rig runs until told otherwise
-        self._mech = self._sim.model.mech
-        self._tension_cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._start_position_mm = scene.drive.start_position_mm
-        self._held: _HeldPose | None = None
         self._t_ms = 0.0
+        self._strikes: list[_Strike] = [_Strike(scene, self._drive, 0.0)]
 
     # --- time and the stage ---------------------------------------------------------------
     @property
@@ -69,22 +81,34 @@ class World:
         return self._t_ms * 1e-3
 
     @property
+    def strikes(self) -> int:
+        """How many times the robot was latched: 1 at the start, one more per re-latch."""
+        return self._strikes[-1].number
+
+    @property
     def held(self) -> bool:
-        """True once the mechanism is held in its post-strike pose."""
-        return self._held is not None
+        """True once the current strike's mechanism is held in its post-strike pose."""
+        return self._current.held is not None
+
+    @property
+    def latched(self) -> bool:
+        """Whether the robot is latched and loading: not yet struck, or re-latched."""
+        return not self.held
+
+    @property
+    def _current(self) -> _Strike:
+        return self._strikes[-1]
 
     def set_stage_velocity(self, velocity_m_per_s: float) -> None:
         """Command the stage from now on (m/s equals mm/ms, the model's unit)."""
         self._drive.command(self._t_ms, float(velocity_m_per_s))
-        if self._held is None:
-            self._sim.drive_changed(self._t_ms)
+        self._current.drive_changed(self._t_ms)
 
     def move_stage_to(self, position_m: float, speed_m_per_s: float) -> None:
         """Move the stage to position_m at up to speed_m_per_s, ending at rest on the target."""
         target_mm = position_m * 1e3 - self._start_position_mm
         self._drive.move_to(self._t_ms, target_mm, abs(float(speed_m_per_s)))
-        if self._held is None:
-            self._sim.drive_changed(self._t_ms)
+        self._current.drive_changed(self._t_ms)
 
     def stage_position_m(self) -> float:
         return (self._start_position_mm + self._drive.pulled(self._t_ms)[0]) * 1e-3
@@ -96,49 +120,51 @@ class World:
         target = t_s * 1e3
         if target <= self._t_ms:
             return
-        if self._held is None:
-            peak = self._sim.run_data.peak_time_ms
-            stop = min(target, peak + SETTLE_AFTER_PEAK_MS) if math.isfinite(peak) else target
-            self._sim.advance(stop)
-            peak = self._sim.run_data.peak_time_ms
-            if math.isfinite(peak) and self._sim.t >= peak + SETTLE_AFTER_PEAK_MS:
-                self._hold()
-            self._forget_before(self._sim.t - self.history_s * 1e3)
+        self._current.advance_to(target)
         self._t_ms = target
+        if self._ready_to_relatch():
+            if self.operator_relatches:
+                self._relatch()
+            elif self._current.free_from_ms is None:
+                self._current.free_from_ms = self._t_ms
+        self._forget_before(self._t_ms - self.history_s * 1e3)
 
-    # --- the mechanism ---------------------------------------------------------------------
+    def _ready_to_relatch(self) -> bool:
+        pulled_mm, velocity, _ = self._drive.pulled(self._t_ms)
+        return self.held and velocity == 0.0 and abs(pulled_mm) <= RELATCH_TOLERANCE_MM
+
+    def _relatch(self) -> None:
+        scene = self._relatch_scene(self.strikes + 1)
+        self._strikes.append(_Strike(scene, self._drive, self._t_ms, self.strikes + 1))
+
+    # --- the mechanism (the current strike's) ---------------------------------------------
     @property
     def phase(self) -> str:
-        return self._sim.phase
+        return self._current.sim.phase
 
     @property
     def phase_start_s(self) -> dict:
-        return {k: v * 1e-3 for k, v in self._sim.run_data.phase_start_ms.items()}
+        strike = self._current
+        return {k: strike.world_ms(v) * 1e-3
+                for k, v in strike.sim.run_data.phase_start_ms.items()}
 
     @property
     def events(self) -> list:
-        """(name, t_s) of every event so far: unlatch, overcenter, max_contraction, peak, ..."""
-        return [(name, t * 1e-3) for name, t, _ in self._sim.run_data.events]
+        """(name, t_s) of every event of the current strike: unlatch, overcenter, peak, ..."""
+        strike = self._current
+        return [(name, strike.world_ms(t) * 1e-3) for name, t, _ in strike.sim.run_data.events]
 
     @property
     def peak_time_s(self) -> float:
-        return self._sim.run_data.peak_time_ms * 1e-3
+        strike = self._current
+        return strike.world_ms(strike.sim.run_data.peak_time_ms) * 1e-3
 
     def tendon_force_N(self, times_s) -> np.ndarray:
         """True tendon tension at each time (within the kept history, not past time_s)."""
         times_ms = self._check_times(times_s)
         forces = np.empty(times_ms.size)
-        moving = self._simulated(times_ms)
-        if self._held is not None:
-            forces[~moving] = self._held.balance(self._pulled_mm(times_ms[~moving]))[1]
-        segments = self._sim.run_data.segments
-        index = self._segment_index(times_ms[moving])
-        simulated = np.empty(index.size)
-        for i in np.unique(index):
-            knots_t, knots_f = self._tension_knots(segments[i])
-            mask = index == i
-            simulated[mask] = np.interp(times_ms[moving][mask], knots_t, knots_f)
-        forces[moving] = simulated
+        for strike, at in self._by_strike(times_ms):
+            forces[at] = strike.tendon_force_N(times_ms[at])
         return forces
 
     def marker_positions_m(self, times_s) -> dict:
@@ -150,47 +176,24 @@ class World:
     def joint_angles_rad(self, times_s) -> tuple[np.ndarray, np.ndarray]:
         """(theta1, theta3) at each time (within the kept history, not past time_s)."""
         times_ms = self._check_times(times_s)
-        moving = self._simulated(times_ms)
         th1, th3 = np.empty(times_ms.size), np.empty(times_ms.size)
-        if self._held is not None and not moving.all():
-            th1[~moving] = self._held.balance(self._pulled_mm(times_ms[~moving]))[0]
-            th3[~moving] = self._held.th3
-        segments = self._sim.run_data.segments
-        index = self._segment_index(times_ms)
-        for i in np.unique(index[moving]):
-            seg = segments[i]
-            at = np.flatnonzero(moving & (index == i))
-            th1[at], th3[at] = seg.dense.angles(np.clip(times_ms[at], seg.t[0], seg.t[-1]))
+        for strike, at in self._by_strike(times_ms):
+            th1[at], th3[at] = strike.joint_angles_rad(times_ms[at])
         return th1, th3
 
     # --- internals -------------------------------------------------------------------------
-    def _simulated(self, times_ms: np.ndarray) -> np.ndarray:
-        """Which times the integrated motion covers (the rest fall in the held pose)."""
-        if self._held is None:
-            return np.ones(times_ms.size, dtype=bool)
-        return times_ms <= self._held.t_ms
-
-    def _segment_index(self, times_ms: np.ndarray) -> np.ndarray:
-        starts = [seg.t[0] for seg in self._sim.run_data.segments]
-        return np.searchsorted(starts, times_ms, side='right') - 1
-
-    def _hold(self) -> None:
-        sim = self._sim
-        seg = sim.run_data.segments[-1]
-        tension = sim.dynamics_at(seg, sim.t, sim.state).tension_N
-        self._held = _HeldPose(self._mech, sim.t, float(sim.state[0]), float(sim.state[1]),
-                               tension, self._drive.pulled(sim.t)[0], sim.model.k_t,
-                               self.scene.spring.k_Nmm_per_rad)
-
-    def _pulled_mm(self, times_ms: np.ndarray) -> np.ndarray:
-        return self._drive.pulled_mm(times_ms)
+    def _by_strike(self, times_ms: np.ndarray):
+        """(strike, indices of the times that fall in it) for each strike that has some."""
+        starts = [strike.t0_ms for strike in self._strikes]
+        index = np.searchsorted(starts, times_ms, side='right') - 1
+        for i in np.unique(index):
+            yield self._strikes[max(i, 0)], np.flatnonzero(index == i)
 
     def _check_times(self, times_s) -> np.ndarray:
         times_ms = np.atleast_1d(np.asarray(times_s, dtype=float)) * 1e3
         if times_ms.size == 0:
             return times_ms
-        segments = self._sim.run_data.segments
-        earliest = segments[0].t[0] if segments else self._sim.t
+        earliest = self._strikes[0].earliest_ms()
         latest = self._t_ms
         if times_ms.min() < earliest - 1e-9 or times_ms.max() > latest + 1e-9:
             raise SimulationError(
@@ -199,20 +202,10 @@ class World:
                 f'{latest * 1e-3:.6f} s (history {self.history_s} s)')
         return np.clip(times_ms, earliest, latest)
 
-    def _tension_knots(self, seg) -> tuple[np.ndarray, np.ndarray]:
-        key = id(seg)
-        if key not in self._tension_cache:
-            t0, t1 = seg.t[0], seg.t[-1]
-            grid = np.arange(t0, t1, TENSION_GRID_MS)
-            knots = np.union1d(seg.t, grid)
-            forces = np.array([self._sim.dynamics_at(seg, t, seg.dense(t)).tension_N
-                               for t in knots])
-            self._tension_cache[key] = (knots, forces)
-        return self._tension_cache[key]
-
     def _markers_mm(self, th1: np.ndarray, th3: np.ndarray) -> dict:
         """Marker positions (name -> (n, 2) mm, camera frame) for arrays of joint angles."""
-        b = (self._mech.L1 * np.cos(th1), self._mech.L1 * np.sin(th1))
+        L1 = self._current.sim.model.mech.L1
+        b = (L1 * np.cos(th1), L1 * np.sin(th1))
         frames = {'mb': ((0.0, 0.0), th1), 'ma': (b, th1 + math.pi - th3)}
         out = {}
         for name, (across, along) in {**BODY_MARKERS_MM, **ARM_MARKERS_MM}.items():
@@ -224,12 +217,149 @@ class World:
         return out
 
     def _forget_before(self, t_ms: float) -> None:
-        segments = self._sim.run_data.segments
+        while len(self._strikes) > 1 and self._strikes[1].t0_ms < t_ms:
+            del self._strikes[0]
+        self._strikes[0].forget_before(t_ms)
+
+
+class _StrikeDrive:
+    """The stage as one strike's simulation sees it: on the strike's own clock (0 at its
+    latch) and pulled from where the stage stood then."""
+
+    def __init__(self, drive: CommandedPull, t0_ms: float):
+        self.drive, self.t0_ms = drive, t0_ms
+        self.x0_mm = drive.pulled(t0_ms)[0] if t0_ms > 0.0 else 0.0
+
+    def pulled(self, t: float) -> tuple[float, float, float]:
+        x, v, a = self.drive.pulled(t + self.t0_ms)
+        return x - self.x0_mm, v, a
+
+    def pulled_mm(self, times_ms: np.ndarray) -> np.ndarray:
+        return self.drive.pulled_mm(np.asarray(times_ms) + self.t0_ms) - self.x0_mm
+
+    def breakpoints(self) -> list[float]:
+        return [t - self.t0_ms for t in self.drive.breakpoints() if t > self.t0_ms]
+
+
+class _Strike:
+    """One latching of the robot and what followed: its hybrid simulation (on its own clock,
+    0 at the latch), and once it settled after the strike, the held pose. Times in and out are
+    the world's, in ms."""
+
+    def __init__(self, scene: Scene, drive: CommandedPull, t0_ms: float, number: int = 1):
+        self.scene, self.t0_ms, self.number = scene, t0_ms, number
+        self.drive = _StrikeDrive(drive, t0_ms)
+        self.sim = HybridSimulator(scene, dense=True)
+        self.sim.model.drive = self.drive
+        self.sim.start()
+        self.sim.stop_at = math.inf         # the rig runs until told otherwise
+        self.mech = self.sim.model.mech
+        self.held: _HeldPose | None = None
+        self.free_from_ms: float | None = None   # world time the arm was left free (unlatched)
+        self._tension_cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def world_ms(self, t_ms: float) -> float:
+        return t_ms + self.t0_ms
+
+    def drive_changed(self, world_t_ms: float) -> None:
+        if self.held is None:
+            self.sim.drive_changed(world_t_ms - self.t0_ms)
+
+    def advance_to(self, world_target_ms: float) -> None:
+        if self.held is not None:
+            return
+        target = world_target_ms - self.t0_ms
+        sim = self.sim
+        peak = sim.run_data.peak_time_ms
+        stop = min(target, peak + SETTLE_AFTER_PEAK_MS) if math.isfinite(peak) else target
+        sim.advance(stop)
+        peak = sim.run_data.peak_time_ms
+        if math.isfinite(peak) and sim.t >= peak + SETTLE_AFTER_PEAK_MS:
+            self._hold()
+
+    def earliest_ms(self) -> float:
+        segments = self.sim.run_data.segments
+        return self.world_ms(segments[0].t[0] if segments else self.sim.t)
+
+    def tendon_force_N(self, world_ms: np.ndarray) -> np.ndarray:
+        times_ms = world_ms - self.t0_ms
+        forces = np.empty(times_ms.size)
+        moving = self._simulated(times_ms)
+        if self.held is not None:
+            forces[~moving] = self.held.balance(self.drive.pulled_mm(times_ms[~moving]))[1]
+            forces[self._free(world_ms)] = 0.0
+        segments = self.sim.run_data.segments
+        index = self._segment_index(times_ms[moving])
+        simulated = np.empty(index.size)
+        for i in np.unique(index):
+            knots_t, knots_f = self._tension_knots(segments[i])
+            mask = index == i
+            simulated[mask] = np.interp(times_ms[moving][mask], knots_t, knots_f)
+        forces[moving] = simulated
+        return forces
+
+    def joint_angles_rad(self, world_ms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        times_ms = world_ms - self.t0_ms
+        moving = self._simulated(times_ms)
+        th1, th3 = np.empty(times_ms.size), np.empty(times_ms.size)
+        if self.held is not None and not moving.all():
+            pulled_mm = self.drive.pulled_mm(times_ms[~moving])
+            if self.free_from_ms is not None:     # the free arm stays where it was left
+                free = self._free(world_ms[~moving])
+                pulled_mm[free] = self.drive.pulled_mm(self.free_from_ms - self.t0_ms)
+            th1[~moving] = self.held.balance(pulled_mm)[0]
+            th3[~moving] = self.held.th3
+        segments = self.sim.run_data.segments
+        index = self._segment_index(times_ms)
+        for i in np.unique(index[moving]):
+            seg = segments[i]
+            at = np.flatnonzero(moving & (index == i))
+            th1[at], th3[at] = seg.dense.angles(np.clip(times_ms[at], seg.t[0], seg.t[-1]))
+        return th1, th3
+
+    def forget_before(self, world_t_ms: float) -> None:
+        t_ms = world_t_ms - self.t0_ms
+        segments = self.sim.run_data.segments
         keep_from = 0
         while keep_from < len(segments) - 1 and segments[keep_from].t[-1] < t_ms:
             self._tension_cache.pop(id(segments[keep_from]), None)
             keep_from += 1
         del segments[:keep_from]
+
+    def _simulated(self, times_ms: np.ndarray) -> np.ndarray:
+        """Which times the integrated motion covers (the rest fall in the held pose)."""
+        if self.held is None:
+            return np.ones(times_ms.size, dtype=bool)
+        return times_ms <= self.held.t_ms
+
+    def _free(self, world_ms: np.ndarray) -> np.ndarray:
+        """Which times fall after the arm was left free (the operator did not re-latch)."""
+        if self.free_from_ms is None:
+            return np.zeros(np.shape(world_ms), dtype=bool)
+        return world_ms >= self.free_from_ms
+
+    def _segment_index(self, times_ms: np.ndarray) -> np.ndarray:
+        starts = [seg.t[0] for seg in self.sim.run_data.segments]
+        return np.searchsorted(starts, times_ms, side='right') - 1
+
+    def _hold(self) -> None:
+        sim = self.sim
+        seg = sim.run_data.segments[-1]
+        tension = sim.dynamics_at(seg, sim.t, sim.state).tension_N
+        self.held = _HeldPose(self.mech, sim.t, float(sim.state[0]), float(sim.state[1]),
+                              tension, self.drive.pulled(sim.t)[0], sim.model.k_t,
+                              self.scene.spring.k_Nmm_per_rad)
+
+    def _tension_knots(self, seg) -> tuple[np.ndarray, np.ndarray]:
+        key = id(seg)
+        if key not in self._tension_cache:
+            t0, t1 = seg.t[0], seg.t[-1]
+            grid = np.arange(t0, t1, TENSION_GRID_MS)
+            knots = np.union1d(seg.t, grid)
+            forces = np.array([self.sim.dynamics_at(seg, t, seg.dense(t)).tension_N
+                               for t in knots])
+            self._tension_cache[key] = (knots, forces)
+        return self._tension_cache[key]
 
 
 class _HeldPose:

@@ -200,3 +200,80 @@ def test_the_commanded_pull_at_many_times_is_its_pull_at_each():
     times_ms = np.concatenate([[-1.0, 0.0], np.linspace(0.0, 8000.0, 20001)])
     one_by_one = np.array([drive.pulled(t)[0] for t in times_ms])
     assert np.array_equal(drive.pulled_mm(times_ms), one_by_one)
+
+
+def _strike_then_return(world, velocity=2.33e-3, speed=2.0e-3, t=None):
+    """Pull until the arm is held after its strike, stop, move back to the start; return the
+    world time at the end and the strike's (peak time, peak force) relative to the pull."""
+    t = world.time_s if t is None else t
+    start = world.stage_position_m()
+    pull_at = t
+    world.set_stage_velocity(velocity)
+    while not world.held:
+        t += STEP_S
+        world.advance_to(t)
+    peak_s = world.peak_time_s - pull_at
+    peak_force = world.tendon_force_N(np.linspace(pull_at + 1.0, world.peak_time_s, 500)).max()
+    world.set_stage_velocity(0.0)
+    world.move_stage_to(start, speed)
+    while world.stage_velocity_m_per_s() != 0.0 or world.stage_position_m() != start:
+        t += STEP_S
+        world.advance_to(t)
+    t += STEP_S
+    world.advance_to(t)
+    return t, peak_s, peak_force
+
+
+def test_the_robot_is_relatched_when_the_stage_is_back_at_its_start():
+    """As the operator re-latches the robot between strikes: the next pull strikes again, as
+    the first did; the force stays continuous across the re-latch."""
+    world = World(load_scene('air_23mm_rig'))
+    t, first_peak_s, first_force = _strike_then_return(world)
+    assert world.strikes == 2 and world.phase == 'I' and not world.held
+    t2, second_peak_s, second_force = _strike_then_return(world, t=t)
+    assert world.strikes == 3
+    assert second_peak_s == pytest.approx(first_peak_s, abs=2e-4)
+    assert second_force == pytest.approx(first_force, rel=1e-3)
+    # no jump where the robot was re-latched: the tendon is slack there (stage at its start)
+    span = np.linspace(t2 - 1.5, t2, 3000)
+    assert np.all(np.isfinite(world.tendon_force_N(span)))
+
+
+def test_a_stage_that_does_not_return_leaves_the_robot_unlatched():
+    world = World(load_scene('reference_air_23mm'))
+    world.set_stage_velocity(2.33e-3)
+    t = 0.0
+    while not world.held:
+        t += STEP_S
+        world.advance_to(t)
+    world.set_stage_velocity(0.0)
+    world.move_stage_to(world.stage_position_m() - 1e-3, 2e-3)
+    world.advance_to(t + 2.0)
+    assert world.strikes == 1 and world.held
+
+
+def test_each_relatch_may_draw_its_own_robot():
+    drawn = []
+
+    def relatch_scene(n):
+        drawn.append(n)
+        return load_scene('air_23mm_rig', overrides=['spring.k_Nmm_per_rad=40'])
+
+    world = World(load_scene('air_23mm_rig'), relatch_scene=relatch_scene)
+    t, first_peak_s, _ = _strike_then_return(world)
+    _, second_peak_s, _ = _strike_then_return(world, t=t)
+    assert drawn[0] == 2 and second_peak_s != pytest.approx(first_peak_s, abs=1e-3)
+
+
+def test_a_robot_left_unlatched_holds_no_tension_on_the_next_pull():
+    """The operator forgot to re-latch: the tendon only swings the free arm."""
+    world = World(load_scene('air_23mm_rig'), operator_relatches=False)
+    t, _, peak_force = _strike_then_return(world)
+    assert world.strikes == 1 and not world.latched and peak_force > 5.0
+    world.set_stage_velocity(0.2e-3)
+    times = t + np.arange(1, 101) * 0.05                # 1 mm of take-up
+    for time_s in times:
+        world.advance_to(time_s)
+    assert np.all(world.tendon_force_N(times) == 0.0)
+    th1, th3 = world.joint_angles_rad(times)
+    assert np.ptp(th1) == 0.0 and np.ptp(th3) == 0.0
