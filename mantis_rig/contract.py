@@ -153,10 +153,16 @@ MARKERS = Topic('camera/markers', 'std_msgs/msg/Float64MultiArray', SENSOR_QOS, 
                 'mantis_rig/recording/marker_block.py)')
 SUPERVISOR_STATE = Topic('supervisor/state', 'std_msgs/msg/String', STATE_QOS, SUPERVISOR_NODE,
                          'the trial state: idle, configuring, homing, taking_up_slack, taring, '
-                         'arming, pulling, released, stopping, returning, done, aborted')
+                         'arming, pulling, released, stopping, returning, done, aborted, '
+                         'waiting_for_relatch (after a strike: a person re-latches the robot)')
 DIAGNOSTICS = Topic('diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', STATUS_QOS,
                     f'{SIM_WORLD_NODE}, the device nodes, {SUPERVISOR_NODE}',
                     '1 Hz and on every state change; a status name starts with its node name')
+#: stage_node's diagnostics: how many moves the stage stopped or refused itself (a soft travel
+#: limit, a limit switch, a command outside its envelope), and the last one's reason; the
+#: supervisor ends a trial when the count grows
+MOTION_STOPS_KEY = 'motion_stops'
+LAST_MOTION_STOP_KEY = 'last_motion_stop'
 CLOCK = Topic('clock', 'rosgraph_msgs/msg/Clock', CLOCK_QOS,
               f'{SIM_WORLD_NODE}, `mantis replay --clock`',
               'simulated time (the world\'s; a replay\'s log time)')
@@ -403,6 +409,9 @@ WORLD_PARAMETERS = (
     ParamSpec('step_s', 0.01, 's', 'simulated time per world step', (1e-4, 0.1)),
     ParamSpec('max_lead_s', 0.05, 's', 'simulated time the world may run ahead of the load '
               f'cell\'s {FORCE_BLOCK} stream while that streams (0: no limit)', (0.0, 10.0)),
+    ParamSpec('relatch', True, '', 'the operator re-latches the robot once the stage is back '
+              'at its start after a strike (false: forgets, which the supervisor\'s latch '
+              'check must catch)'),
 )
 #: the supervisor's parameters: the trial conditions (CONDITION_KEYS), then the procedure
 SUPERVISOR_PARAMETERS = (
@@ -424,6 +433,9 @@ SUPERVISOR_PARAMETERS = (
               (0.01, 5.0)),
     ParamSpec('slack_speed_mm_s', 0.2, 'mm/s', 'stage speed while taking up slack',
               (0.01, MAX_SPEED_MM_S)),
+    ParamSpec('latch_check_mm', 2.0, 'mm', 'a tendon still slack after this much take-up '
+              'means the robot is not latched: the trial aborts and asks for a re-latch',
+              (0.05, MAX_TRAVEL_MM)),
     ParamSpec('supervisor_force_monitor', True, '', 'the supervisor aborts above '
               f'{FORCE_CEILING.name} itself (false only to test the guards beneath it)'),
     ParamSpec('release_jump_n', 1.0, 'N', 'release: 1 ms mean force moves by more than this',

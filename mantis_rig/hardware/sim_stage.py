@@ -118,6 +118,7 @@ class SimStage(Stage):
         move) and wait until it rests there; a stop() meanwhile ends the move."""
         deadline = time.monotonic() + timeout_s
         self._stop_watch.clear()
+        self._limit_hit = (False, False)       # a move to a position leaves the limit
         with self._lock:
             self._velocity_cmd = 0.0
             self.port.move_stage_to(target_m, speed)

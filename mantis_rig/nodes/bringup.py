@@ -50,6 +50,7 @@ class StackConfig:
     processes: str = 'single'
     supervisor: dict = field(default_factory=dict)          # supervisor parameter overrides
     devices: dict = field(default_factory=dict)             # node name -> parameter overrides
+    world: dict = field(default_factory=dict)               # sim_world_node parameter overrides
     namespace: str = ''     # the rig's ROS namespace ('': none, i.e. '/'); e.g. '/rig2'
 
     @property
@@ -65,7 +66,8 @@ class StackConfig:
         if self.sim:
             params[WORLD.name] = {'scene': self.scene, 'seed': self.seed,
                                   'set': list(overrides),
-                                  'real_time_factor': float(self.real_time_factor)}
+                                  'real_time_factor': float(self.real_time_factor),
+                                  **self.world}
         # one force ceiling for every guard (mantis_rig.trial.safety_limits)
         ceiling = {FORCE_CEILING_NAME: float(self.supervisor[FORCE_CEILING_NAME])} \
             if FORCE_CEILING_NAME in self.supervisor else {}

@@ -20,7 +20,8 @@ from mantis_rig.trial.sequence import Pending
 
 TRIGGER_SERVICES = tuple(service.name for service in contract.DEVICE_SERVICES)
 TRANSITIONS = {'configure': Transition.TRANSITION_CONFIGURE,
-               'activate': Transition.TRANSITION_ACTIVATE}
+               'activate': Transition.TRANSITION_ACTIVATE,
+               'deactivate': Transition.TRANSITION_DEACTIVATE}
 SERVICE_WAIT_S = 10.0
 
 

@@ -5,7 +5,9 @@ A thread advances the mantis_sim World by `step_s` of simulated time per step, p
 catching up), and publishes /clock after each step. The simulated devices reach the world by
 direct calls (a LocalWorldPort on `runner`), in the same process: the node is one part of
 mantis_rig.nodes.sim_rig, the simulated rig. Once a wall second, /diagnostics gets the status
-`sim_world_node: world` (keys time_s, phase, peak_time_s, stage position/velocity).
+`sim_world_node: world` (keys time_s, phase, peak_time_s, stage position/velocity, strikes:
+how often the robot was latched, latched). The `relatch` parameter says whether the simulated
+operator re-latches the robot once the stage is back at its start (mantis_sim.world).
 """
 from __future__ import annotations
 
@@ -42,7 +44,7 @@ class SimWorldNode(WithoutDefaultEventHandlers, Node):
             declare(self, spec)
         value = self._value
         self.scene = load_scene(value('scene'), [s for s in value('set') or [] if s])
-        self.world = World(self.scene)
+        self.world = World(self.scene, operator_relatches=value('relatch'))
         self.step_s = value('step_s')
         self._step_index = round(self.world.time_s / self.step_s)
         self._phase = self.world.phase
@@ -104,6 +106,8 @@ class SimWorldNode(WithoutDefaultEventHandlers, Node):
                           peak_time_s=f'{world.peak_time_s:.6f}',
                           stage_position_m=f'{world.stage_position_m():.7f}',
                           stage_velocity_m_per_s=f'{world.stage_velocity_m_per_s():.7f}',
+                          strikes=str(world.strikes),
+                          latched='true' if world.latched else 'false',
                           scene=self.scene.name)
         failure = self.runner.failure
         status = DiagnosticStatus(

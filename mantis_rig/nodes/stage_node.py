@@ -5,7 +5,10 @@ effort [0.0]: not measured, but never empty, which the rosbags reader needs),
 /stage/velocity_command and /stage/position_command move the stage (a position move runs in a
 worker thread; any new command or /stage/stop ends it), /stage/home blocks until homed.
 /stage/stop works whenever the device is open. A command the driver's safety envelope refuses
-(speed ceiling, travel limits) is refused with a warning; a device error is a fault.
+(speed ceiling, travel limits) is refused with a warning; a device error is a fault. A refusal
+of that kind, and a move the stage stopped at a travel limit (soft limit or limit switch), are
+counted on /diagnostics (`motion_stops`, `last_motion_stop`): the supervisor ends its trial
+on them at once.
 The force ceiling holds in the driver layer too: the stage is a StageGuard fed with every
 /loadcell/force_block (on a SideNode: 100 messages a second), which stops the stage above
 `force_ceiling_n` and refuses or stops a pull when the readings are older than
@@ -65,6 +68,9 @@ class StageNode(DeviceNode):
         self._move_lock = threading.Lock()
         self._last_state = None
         self._refused: str | None = None
+        self._motion_stops = 0
+        self._last_motion_stop = ''
+        self._at_limit = False
         self._stopping = False          # a move ending now was stopped on purpose
         self._stop_cause = ''           # why the process stopped the stage (emergency_stop)
         self._reported_trip: str | None = None
@@ -126,6 +132,9 @@ class StageNode(DeviceNode):
                           reverse_limit=_flag(state.reverse_limit))
         if self._refused:
             values['last_refused_command'] = self._refused
+        values[contract.MOTION_STOPS_KEY] = str(self._motion_stops)
+        if self._last_motion_stop:
+            values[contract.LAST_MOTION_STOP_KEY] = self._last_motion_stop
         return values
 
     def destroy_node(self):
@@ -187,6 +196,7 @@ class StageNode(DeviceNode):
             self.fault(f'reading the stage state: {exc}')
             return
         self._last_state = state
+        self._watch_limits(state)
         msg = JointState(name=['stage'], position=[state.position_m],
                          velocity=[state.velocity_m_per_s], effort=[0.0])
         msg.header.stamp = self.get_clock().now().to_msg()
@@ -196,6 +206,21 @@ class StageNode(DeviceNode):
             self._report_trip(trip)
         if state.fault and state.fault != str(trip):
             self.fault(f'stage reports a fault: {state.fault}')
+
+    def _watch_limits(self, state) -> None:
+        at_limit = state.forward_limit or state.reverse_limit
+        if at_limit and not self._at_limit:
+            which = 'forward' if state.forward_limit else 'reverse'
+            self._motion_stopped(f'stopped at the {which} travel limit (soft limit or limit '
+                                 f'switch) at {state.position_m * 1e3:.4f} mm')
+        self._at_limit = at_limit
+
+    def _motion_stopped(self, reason: str) -> None:
+        """The stage stopped or refused a move itself: count it and say why (WARN)."""
+        self._motion_stops += 1
+        self._last_motion_stop = reason
+        self.get_logger().warning(reason)
+        self.report(WARN, reason)
 
     # --- commands ---------------------------------------------------------------------------
     def _on_velocity(self, msg: Float64) -> None:
@@ -258,7 +283,10 @@ class StageNode(DeviceNode):
             if self._refused is not None:
                 self._refused = None
                 self.report(OK, f'active ({self.backend_name})')
-        except (ConfigurationError, SafetyLimitError) as exc:   # the driver's envelope
+        except ConfigurationError as exc:       # outside the envelope: no retry will help
+            self._refused = f'{what} refused: {exc}'
+            self._motion_stopped(self._refused)
+        except SafetyLimitError as exc:         # the force guard: may pass once a reading comes
             self._refuse(f'{what} refused: {exc}')
         except DeviceError as exc:
             if self.device is stage and self.is_active and not self._stopping:

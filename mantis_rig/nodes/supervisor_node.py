@@ -1,7 +1,10 @@
 """supervisor_node: runs a trial on the rig (``ros2 run mantis_rig supervisor_node``).
 
 Services ``/supervisor/start_trial`` and ``/supervisor/abort`` (std_srvs/Trigger); state on
-``/supervisor/state`` (std_msgs/String, transient local) and on ``/diagnostics``. The trial
+``/supervisor/state`` (std_msgs/String, transient local) and on ``/diagnostics``. One bring-up
+runs any number of trials: a start is refused until the previous trial has closed its log, and
+each trial starts from where the first one started (mantis_rig.trial.sequence.SessionState).
+A second abort while an aborted trial returns the stage stops it where it is. The trial
 conditions and procedure settings are parameters (mantis_rig.trial.conditions); they are
 fixed while a trial runs. Each trial is logged to its own bag directory under ``out``; the
 start_trial response names it. The sequence itself is mantis_rig.trial.sequence.
@@ -31,7 +34,7 @@ from mantis_rig.recording.force_block import force_block_from_msg
 from mantis_rig.recording.marker_block import marker_block_from_msg
 from mantis_rig.trial.conditions import PARAMETERS, ConditionError, TrialConditions, check_value
 from mantis_rig.trial.log_space import free_space_problem
-from mantis_rig.trial.sequence import TrialSequence
+from mantis_rig.trial.sequence import SessionState, TrialSequence
 
 from .executors import SideNode, light_executor, run_node
 from .lean_node import WithoutDefaultEventHandlers
@@ -43,6 +46,7 @@ STATUS_NAME = f'{NODE_NAME}: trial'
 
 LOG_WRITE_FAILED = 'log write failed'     # how the abort reason of a failed log begins
 LOG_TAIL_WAIT_S = 2.0
+STILL_CLOSING = 'is still closing its log'    # how a start refused for that says so
 
 
 def left_active(state_label: str) -> str:
@@ -80,6 +84,8 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
         self.bag: BagWriter | None = None
         self.bag_path: Path | None = None
         self.trials = 0
+        self.session = SessionState()
+        self._stage_motion_stops: int | None = None    # the stage's count (its diagnostics)
         self.last_abort_reason = ''
         self._state, self._state_reason = 'idle', ''
         self._state_lock = threading.Lock()
@@ -161,8 +167,12 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
         return response
 
     def start_trial(self) -> tuple[bool, str]:
-        if self.sequence is not None and self.sequence.running:
-            return False, f'a trial is already in progress (state {self.sequence.state})'
+        previous = self.sequence
+        if previous is not None and previous.running:
+            return False, f'a trial is already in progress (state {previous.state})'
+        if previous is not None and not previous.finished.is_set():
+            return False, (f'trial {self.trials} {STILL_CLOSING} (state {previous.state}); '
+                           f'start again once it has')
         try:
             conditions = self.conditions()
             path = bag_directory(conditions.out)
@@ -178,17 +188,24 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
         self.trials += 1
         self._final_state_bytes = None
         self._final_state_logged.clear()
-        sequence = TrialSequence(self.rig, conditions, self._close_log)
+        number = self.trials
+        sequence = TrialSequence(self.rig, conditions,
+                                 lambda outcome: self._close_log(outcome, number, bag, path),
+                                 self.session)
         self.sequence = sequence
         self.recorder.start(bag)
         sequence.start()
-        self.get_logger().info(f'trial {self.trials} started; logging to {path}')
+        self.get_logger().info(f'trial {number} started; logging to {path}')
         return True, f'trial started; logging to {path}'
 
     def abort(self, reason: str) -> tuple[bool, str]:
         if self.sequence is None:
             return False, 'no trial in progress (state idle)'
-        ok, message = self.sequence.abort(reason)
+        sequence = self.sequence
+        ok, message = sequence.abort(reason)
+        if not ok and sequence.running:         # asked again: not even the return goes on
+            sequence.stop_where_it_is()
+            message += '; the stage is stopped where it is'
         return ok, message
 
     def _on_log_failure(self, failure: BagWriteError) -> None:
@@ -202,17 +219,18 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
         if sequence is not None:
             sequence.abort(reason)
 
-    def _close_log(self, outcome: dict) -> None:
-        if self.bag is not None and self.bag.failure is None:
+    def _close_log(self, outcome: dict, number: int, bag: BagWriter, path: Path) -> None:
+        """Close trial ``number``'s log ``bag`` (at ``path``), and say so in one line."""
+        if bag.failure is None:
             self._final_state_logged.wait(LOG_TAIL_WAIT_S)
         self.recorder.stop()
-        bag, self.bag = self.bag, None
-        if bag is not None:
-            bag.close(trial_outcome=outcome)
+        if self.bag is bag:
+            self.bag = None
+        bag.close(trial_outcome=outcome)
         if outcome.get('result') == 'aborted':
             self.last_abort_reason = outcome.get('reason', '')
-        self.get_logger().info(f'trial {self.trials} {outcome.get("result")}: '
-                               f'{outcome.get("reason") or "ok"}; log closed: {self.bag_path}')
+        self.get_logger().info(f'trial {number} {outcome.get("result")}: '
+                               f'{outcome.get("reason") or "ok"}; log closed: {path}')
 
     def _on_recorded(self, topic: str, data: bytes) -> None:
         watched = self._watched.get(topic)
@@ -274,19 +292,36 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
 
     def _on_diagnostics(self, msg) -> None:
         sequence = self.sequence
-        if sequence is None:
-            return
         for status in msg.status:
             device = next((d for d in DEVICE_NODES
                            if d in status.name or d == status.hardware_id), None)
             if device is None:
                 continue
-            sequence.on_device_message(device, status.message)
-            homed = next((kv.value for kv in status.values if kv.key == 'homed'), None)
+            in_error = status.level == DiagnosticStatus.ERROR
+            if in_error:                     # the next trial's bring-up clears it
+                self.session.devices_in_error.add(device)
+            values = {kv.key: kv.value for kv in status.values}
+            stopped = self._stage_stopped_a_move(device, values)
+            if sequence is None:
+                continue
+            sequence.on_device_message(device, status.message, in_error)
+            homed = values.get('homed')
             if homed is not None:
                 sequence.on_stage_homed(homed.strip().lower() in ('true', '1', 'yes'))
-            if status.level == DiagnosticStatus.ERROR:
+            if stopped:
+                sequence.on_stage_motion_stop(values.get(contract.LAST_MOTION_STOP_KEY, ''))
+            if in_error:
                 sequence.on_device_fault(device, status.message or 'diagnostic level ERROR')
+
+    def _stage_stopped_a_move(self, device: str, values: dict) -> bool:
+        """Whether the stage's diagnostics count a move stopped or refused by the stage itself
+        (a travel limit, its envelope) since they were last heard."""
+        count = values.get(contract.MOTION_STOPS_KEY)
+        if device != contract.STAGE_NODE or count is None:
+            return False
+        count, before = int(count), self._stage_motion_stops
+        self._stage_motion_stops = count
+        return before is not None and count > before
 
     def _on_transition(self, device: str, msg) -> None:
         if msg.start_state.id == State.PRIMARY_STATE_ACTIVE \
@@ -307,7 +342,7 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
             return
         if sequence.running:
             self.get_logger().info(f'aborting trial {self.trials}: {reason}')
-            sequence.abort(reason)
+            sequence.abort(reason, return_stage=False)
         sequence.finished.wait(5.0)
 
 

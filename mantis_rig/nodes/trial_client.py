@@ -20,9 +20,13 @@ from std_srvs.srv import Trigger
 from mantis_rig import contract
 
 from .lean_node import WithoutDefaultEventHandlers
-from .supervisor_node import STATUS_NAME
+from .supervisor_node import STATUS_NAME, STILL_CLOSING
 
 ANSWER_GRACE_S = 2.0    # how long an answer is awaited before the supervisor's publications count
+# A trial reports 'done' or 'aborted' before its log is closed (the bag holds that state); a
+# start refused meanwhile is asked again for this long.
+CLOSING_WAIT_S = 15.0
+CLOSING_RETRY_S = 0.1
 
 
 class TrialClient(WithoutDefaultEventHandlers, Node):
@@ -132,7 +136,11 @@ class TrialClient(WithoutDefaultEventHandlers, Node):
         """Ask the supervisor to start a trial; (started, its message). `trial_start` is then
         the index in self.states from which wait_for_end() looks."""
         self.trial_start = len(self.states)
+        deadline = time.monotonic() + CLOSING_WAIT_S
         ok, message = self.call('start_trial')
+        while not ok and STILL_CLOSING in message and time.monotonic() < deadline:
+            time.sleep(CLOSING_RETRY_S)
+            ok, message = self.call('start_trial')
         if ok:
             self.wait_for_state(('configuring',), self.trial_start, timeout_s=10.0)
             with self._changed:

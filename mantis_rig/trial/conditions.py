@@ -62,6 +62,7 @@ class TrialConditions:
     tare: bool = False
     slack_force_n: float = PARAMETERS['slack_force_n'].default
     slack_speed_mm_s: float = PARAMETERS['slack_speed_mm_s'].default
+    latch_check_mm: float = PARAMETERS['latch_check_mm'].default
     release_jump_n: float = PARAMETERS['release_jump_n'].default
     frame_rate_hz: float = PARAMETERS['frame_rate_hz'].default
     pre_trigger_s: float = PARAMETERS['pre_trigger_s'].default

@@ -4,11 +4,19 @@ topics) and feeds what it hears (force blocks, stage state, camera trigger, mark
 device faults) into the TrialSequence's ``on_*`` methods, from any thread.
 
 ``run()`` (the supervisor's worker thread) goes through
-configuring -> [homing] -> taking_up_slack -> [taring] -> arming -> pulling -> released ->
-stopping -> returning -> done, and ends in ``aborted`` instead when ``abort(reason)`` is called
-(abort service, force ceiling, travel limit, device fault, timeout, failed call). An abort
-stops the stage at once, from the thread that detected it. On release the force callback stops
-the stage and fires the camera trigger itself, without waiting for the worker.
+configuring -> [homing] -> [returning to the start] -> taking_up_slack -> [taring] -> arming ->
+pulling -> released -> stopping -> returning -> done, and ends in ``aborted`` instead when
+``abort(reason)`` is called (abort service, force ceiling, travel limit, the stage stopped by a
+limit or refusing a move, device fault, timeout, failed call). An abort stops the stage at once,
+from the thread that detected it. On release the force callback stops the stage and fires the
+camera trigger itself, without waiting for the worker.
+
+Every trial starts from a known state (a lab runs many on one bring-up): the stage goes to the
+trial's start position (``start_position_mm``, or where the first trial of the bring-up
+started: ``SessionState``) before it takes up slack, and after any end, an abort too, it goes
+back there, unless the stack is shutting down. A robot that struck must be re-latched by hand:
+the trial then ends in ``waiting_for_relatch``. A robot that is not latched is caught while
+taking up slack: the tendon stays slack over ``latch_check_mm`` of take-up.
 """
 from __future__ import annotations
 
@@ -33,8 +41,8 @@ from .conditions import TrialConditions
 from .force_monitor import ForceMonitor
 
 STATES = ('idle', 'configuring', 'homing', 'taking_up_slack', 'taring', 'arming', 'pulling',
-          'released', 'stopping', 'returning', 'done', 'aborted')
-FINAL_STATES = ('idle', 'done', 'aborted')
+          'released', 'stopping', 'returning', 'done', 'aborted', 'waiting_for_relatch')
+FINAL_STATES = ('idle', 'done', 'aborted', 'waiting_for_relatch')
 POLL_S = 0.005                   # the worker's control period
 AT_REST_M_PER_S = 1e-6
 # A move has ended when the stage rested this long, on the rig's clock: simulated time in
@@ -51,7 +59,18 @@ MOVE_START_S = 0.5
 HOMED_WAIT_S = 3.0               # unknown after this long: go on without homing
 QUERY_RETRY_S = 5.0              # an idempotent query unanswered this long is sent again
 STOP_CONFIRM_S = 2.0             # after an abort, wait this long for the stage to report rest
-TRANSITION_GOALS = {'configure': 'inactive', 'activate': 'active'}
+TRANSITION_GOALS = {'configure': 'inactive', 'activate': 'active', 'deactivate': 'inactive'}
+RELATCH_REASON = 're-latch the robot, then start the next trial'
+
+
+class SessionState:
+    """What one bring-up's trials hand on to the next (the supervisor owns it): where the
+    trials start, and which devices reported an ERROR (a latched force-guard trip, a fault)
+    that the next trial's bring-up must clear by cycling them through inactive."""
+
+    def __init__(self):
+        self.start_position_m: float | None = None
+        self.devices_in_error: set[str] = set()
 
 
 class TrialAborted(Exception):
@@ -97,9 +116,12 @@ class RigPort(Protocol):
 
 class TrialSequence:
     def __init__(self, rig: RigPort, conditions: TrialConditions,
-                 close_log: Callable[[dict], None] | None = None):
+                 close_log: Callable[[dict], None] | None = None,
+                 session: SessionState | None = None):
         self.rig = rig
         self.conditions = conditions
+        self.session = session or SessionState()
+        self._reset_devices = set(self.session.devices_in_error)
         self.close_log = close_log or (lambda outcome: None)
         self.monitor = ForceMonitor(conditions.force_ceiling_n, conditions.release_jump_n)
         self.state = 'idle'
@@ -109,6 +131,8 @@ class TrialSequence:
         self.finished = threading.Event()
         self._lock = threading.RLock()
         self._abort = threading.Event()
+        self._return_after_abort = True
+        self._stop_return = threading.Event()      # a second abort ends the return too
         self._released = threading.Event()
         self._active_devices = False
         # what the rig reported
@@ -124,6 +148,8 @@ class TrialSequence:
         self.marker_span_s: tuple[float, float] | None = None
         self.marker_frames = 0
         self.device_messages: dict[str, str] = {}
+        self.device_in_error: dict[str, bool] = {}
+        self.stage_returned = ''
         self._trigger_call: Pending | None = None
 
     # ------------------------------------------------------------------ status
@@ -138,18 +164,26 @@ class TrialSequence:
         self.rig.publish_state(state, reason)
 
     # ------------------------------------------------------------------ aborting
-    def abort(self, reason: str) -> tuple[bool, str]:
-        """Stop the stage now and end the trial as aborted; refused (False, why) when no trial
-        is in progress or it is already ending."""
+    def abort(self, reason: str, return_stage: bool = True) -> tuple[bool, str]:
+        """Stop the stage now and end the trial as aborted, then return the stage to the
+        start (not with ``return_stage=False``: the stack is shutting down); refused (False,
+        why) when no trial is in progress or it is already ending."""
         with self._lock:
             if not self.running:
                 return False, f'no trial in progress (state {self.state})'
             if self._abort.is_set():
                 return False, f'the trial is already aborting: {self.reason}'
             self.reason = reason
+            self._return_after_abort = return_stage
             self._abort.set()
         self.rig.stop_stage()
         return True, f'aborting: {reason}'
+
+    def stop_where_it_is(self) -> None:
+        """A second abort request from the operator: stop the stage, and no return to the
+        start after this abort."""
+        self._stop_return.set()
+        self.rig.stop_stage()
 
     def _check(self) -> None:
         if self._abort.is_set():
@@ -224,8 +258,15 @@ class TrialSequence:
                 (min(span[0], first_s), max(span[1], last_s))
             self.marker_frames += n_frames
 
-    def on_device_message(self, node: str, message: str) -> None:
+    def on_device_message(self, node: str, message: str, in_error: bool = False) -> None:
         self.device_messages[node] = message
+        self.device_in_error[node] = in_error
+
+    def on_stage_motion_stop(self, reason: str) -> None:
+        """The stage stopped a move itself (a soft travel limit, a limit switch) or refused
+        one outside its envelope: the trial cannot go on as planned, so it ends now."""
+        if self._active_devices and self.running:
+            self.abort(f'stage stopped: {reason}')
 
     def on_device_fault(self, node: str, reason: str) -> None:
         if self._active_devices and self.running:
@@ -272,12 +313,21 @@ class TrialSequence:
             if steps is None:
                 self._fail(f'{node} is {label}, cannot bring it up'
                            + self._device_hint(node))
+            if label == 'active' and node in self._reset_devices:
+                steps = ('deactivate', 'activate')     # clears a latched trip or fault
             if node in FORCE_GUARD_NODES:       # one ceiling for every guard
                 self._await(self.rig.set_parameters(
                     node, {FORCE_CEILING_NAME: self.conditions.force_ceiling_n}),
                     f'setting the force ceiling on {node}')
             for transition in steps:
                 self._transition(node, transition)
+        for node in self._reset_devices:
+            # its status since the reset: an ERROR still on its way would abort the trial
+            self.device_in_error[node] = True
+            self._wait(lambda node=node: not self.device_in_error.get(node, False),
+                       f'{node} to report its status after the reset'
+                       + self._device_hint(node))
+        self.session.devices_in_error -= self._reset_devices
         self._active_devices = True
 
     def _device_state(self, node: str) -> str:
@@ -322,12 +372,18 @@ class TrialSequence:
         if self.stage_homed is False:
             self._set_state('homing')
             self._await(self.rig.call(STAGE_HOME.name), 'stage home')
-        if self.conditions.start_position_mm >= 0:
-            error_m = self._move_to(self.conditions.start_position_mm * 1e-3,
-                                    'move to the start position')
-            if abs(error_m) >= self.conditions.position_tolerance_mm * 1e-3:
+        c = self.conditions
+        start_m = c.start_position_mm * 1e-3 if c.start_position_mm >= 0 \
+            else self.session.start_position_m
+        if start_m is not None and \
+                abs(self.stage_position_m - start_m) >= c.position_tolerance_mm * 1e-3:
+            self._set_state('returning')
+            error_m = self._move_to(start_m, 'move to the start position')
+            if abs(error_m) >= c.position_tolerance_mm * 1e-3:
                 self._fail(f'the stage stopped {error_m * 1e3:+.4f} mm from the start position')
-        self.start_position_m = self.stage_position_m
+        self.start_position_m = self.stage_position_m if start_m is None else start_m
+        if self.session.start_position_m is None:
+            self.session.start_position_m = self.start_position_m
 
     def _move_to(self, target_m: float, what: str) -> float:
         """Move to target_m and let the stage settle; retry a move that ends outside the
@@ -363,16 +419,23 @@ class TrialSequence:
     def _take_up_slack(self) -> None:
         self._set_state('taking_up_slack')
         self._wait(lambda: self.monitor.latest_n is not None, 'the force stream')
-        if self.monitor.latest_n < self.conditions.slack_force_n:
-            self.pull_start_position_m = self.stage_position_m
+        c = self.conditions
+        if self.monitor.latest_n < c.slack_force_n:
+            self.pull_start_position_m = start = self.stage_position_m
 
             def taut() -> bool:
-                return self.monitor.latest_n >= self.conditions.slack_force_n
+                return self.monitor.latest_n >= c.slack_force_n
 
-            self._start_moving(self.conditions.slack_speed_mm_s * 1e-3, 'taking up slack',
-                               taut)
-            self._wait(taut, 'taking up slack')
+            def slack_too_long() -> bool:
+                return abs(self.stage_position_m - start) > c.latch_check_mm * 1e-3
+
+            self._start_moving(c.slack_speed_mm_s * 1e-3, 'taking up slack', taut)
+            self._wait(lambda: taut() or slack_too_long(), 'taking up slack')
             self.rig.stop_stage()
+            if not taut():
+                self._fail(f'the robot is not latched: the tendon force stayed below '
+                           f'{c.slack_force_n} N over {c.latch_check_mm} mm of take-up '
+                           f'(latch_check_mm); {RELATCH_REASON}')
             self._wait(self._at_rest, 'the stage to stop after taking up slack')
 
     def _at_rest(self) -> bool:
@@ -430,16 +493,54 @@ class TrialSequence:
         stage_stopped = None
         if state == 'aborted':
             stage_stopped = self._stop_and_confirm()
+            if self._return_after_abort:
+                self.stage_returned = self._return_after_an_abort()
         outcome = self._outcome(result, reason)
         if stage_stopped is not None:
             outcome['stage_stopped'] = stage_stopped
+        if self.stage_returned:
+            outcome['stage_returned'] = self.stage_returned
         self._set_state(state, reason)
         self.outcome = outcome
         try:
             self.close_log(outcome)
         finally:
+            if self.monitor.release_t_s is not None:     # it struck: a person re-latches it
+                self._set_state('waiting_for_relatch', RELATCH_REASON)
             self.finished.set()
         return outcome
+
+    def _return_after_an_abort(self) -> str:
+        """Take the stage back to the trial's start after an abort, at the stage's move speed,
+        so that the next trial finds it there: 'true', or why not. A move that does not start,
+        or ends short (the abort's own stop call may reach the stage after it), is sent again,
+        MOVE_ATTEMPTS in all. A second abort ends the attempt where the stage is."""
+        target = self.start_position_m
+        if target is None or self.stage_position_m is None:
+            return ''
+        tolerance_m = self.conditions.position_tolerance_mm * 1e-3
+        if abs(self.stage_position_m - target) < tolerance_m:
+            return 'true'
+        self._set_state('returning', self.reason)
+        deadline = time.monotonic() + self.conditions.phase_timeout_s
+        for _ in range(MOVE_ATTEMPTS):
+            self.rig.move_to(target)
+            sent = self._command_sent()
+            while True:
+                if self._stop_return.is_set():
+                    return 'false: stopped by a second abort'
+                if time.monotonic() > deadline:
+                    self.rig.stop_stage()
+                    return f'false: not back within {self.conditions.phase_timeout_s} s'
+                rested = self._at_rest() and SETTLED_S <= self.rig.now_s() - self._last_motion
+                if rested and abs(self.stage_position_m - target) < tolerance_m:
+                    return 'true'
+                moved = self._last_motion > sent[0]
+                if (not moved and self._not_acted_on(sent)) or (
+                        moved and rested and SETTLED_S <= self.rig.now_s() - sent[0]):
+                    break                       # not started, or ended short: send it again
+                time.sleep(POLL_S)
+        return 'false: the stage did not reach the start' + self._device_hint(STAGE_NODE)
 
     def _stop_and_confirm(self) -> str:
         """Stop the stage and wait (briefly) for a stage state reporting rest, so that the

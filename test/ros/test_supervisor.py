@@ -194,7 +194,7 @@ def run_trial(rig=None, timeout=30.0, before=None, **conditions):
 def test_a_trial_runs_through_every_phase_and_returns():
     rig, seq, outcome = run_trial()
     assert rig.states == ['configuring', 'taking_up_slack', 'arming', 'pulling', 'released',
-                          'stopping', 'returning', 'done']
+                          'stopping', 'returning', 'done', 'waiting_for_relatch']
     assert outcome['result'] == 'completed' and outcome['reason'] == ''
     assert set(rig.lifecycle.values()) == {'active'}
     assert rig.calls[:2] == ['camera/arm', 'camera/trigger']
@@ -212,8 +212,8 @@ def test_homes_takes_up_slack_and_tares_when_needed():
     # slack until 1 mm, then the force rises as the stage moves
     rig.force = lambda pos, f=rig.force: f(pos) + max(0.0, (pos - 0.001) * 1e3) * 4.0
     _, seq, outcome = run_trial(rig, tare=True, start_position_mm=0.5)
-    assert rig.states[:5] == ['configuring', 'homing', 'taking_up_slack', 'taring', 'arming'], \
-        outcome
+    assert rig.states[:6] == ['configuring', 'homing', 'returning', 'taking_up_slack', 'taring',
+                              'arming'], outcome
     assert rig.calls[:2] == ['stage/home', 'loadcell/tare'] and rig.stops >= 1
     assert 'loadcell/tare' in rig.calls
     assert outcome['result'] == 'completed', outcome
@@ -223,8 +223,10 @@ def test_force_ceiling_aborts_and_stops_the_stage():
     rig, seq, outcome = run_trial(force_ceiling_n=15.0)
     assert outcome['result'] == 'aborted'
     assert outcome['reason'].startswith('force ceiling: ')
-    assert rig.states[-1] == 'aborted' and 'returning' not in rig.states
+    # the ceiling caught the release's jump: it struck, so the robot needs a re-latch
+    assert rig.states[-3:] == ['returning', 'aborted', 'waiting_for_relatch']
     assert rig.v == 0.0 and rig.stops >= 1
+    assert outcome['stage_returned'] == 'true' and abs(rig.pos - rig.origin) < 1e-4
 
 
 def test_the_trials_force_ceiling_is_set_on_every_guard_before_it_is_configured():

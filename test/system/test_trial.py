@@ -198,7 +198,8 @@ def test_air_23mm_trial_in_one_process(ros, tmp_path):
         wait_closed(bag)
         world = stack.node(SIM_WORLD_NODE).world
         peak_time_s = world.peak_time_s
-        assert client.call('abort') == (False, 'no trial in progress (state done)')
+        assert client.call('abort') == (
+            False, 'no trial in progress (state waiting_for_relatch)')
     finally:
         stack.stop()
         client.destroy_node()
