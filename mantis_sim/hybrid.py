@@ -18,6 +18,7 @@ from typing import Optional
 import numpy as np
 
 from .model import Dynamics, Model, SimulationError
+from .parameters import ParameterError
 from .scene import Scene
 
 PHASES = ('I', 'II', 'III', 'IV')
@@ -46,6 +47,23 @@ MAX_EVENTS_AT_ONE_INSTANT = 12
 STILL_STAGE_HORIZON_MS = 1000.0
 MIN_SPAN_MS = 1e-9
 STATE_SCALE = (1.0, 1.0, 1.0, 1.0, 100.0, 100.0)   # rad, rad, rad/ms, rad/ms, mJ, mJ
+# The explicit methods' stability limit, the largest |h lambda| of their stability regions
+# (on the negative real axis; a lightly damped mode allows no more): scipy's tableaux.
+EXPLICIT_STABILITY = {'RK23': 2.5, 'RK45': 3.3, 'DOP853': 6.4}
+# An explicit solver is refused up front when the stiff tendon alone would take more steps
+# than this over the run's horizon at its stability limit. That is a floor: on the undamped
+# tendon mode they step at 1/50 to 1/90 of the limit, resolving its ringing (RK45 on
+# air_23mm_compliant: 23 000 steps, 12 s at 1e3 N/mm; 86 000, 43 s at 1e4; 315 000, 150 s at
+# 1e5), where Radau takes ~500 steps at any stiffness.
+EXPLICIT_STIFF_STEP_BUDGET = 3000
+IMPLICIT_ADVICE = 'use integration.solver=Radau (or LSODA/BDF)'
+# The backstop of run(): no scene integrates for ever. The shipped scenes take 500-3 000
+# right-hand sides, the tightest tolerances of `mantis bench accuracy` up to ~600 000.
+MAX_RHS_EVALS = 2_000_000
+
+
+class StiffSceneError(ParameterError):
+    """An explicit solver on a tendon too stiff for it: the run would take minutes or hours."""
 
 
 @dataclass
@@ -101,7 +119,10 @@ class HybridSimulator:
         integ = scene.integration
         self.method, self.rtol, self.atol_scale = integ.solver, integ.rtol, integ.atol_scale
         self.t_end, self._horizon_cause, self._horizon_kind = self._horizon(scene)
+        self._refuse_stiff_explicit()
         self.post_peak = integ.post_peak_ms
+        # run()'s budget: the model's rhs_evals beyond which it stops (None: no budget)
+        self.max_rhs_evals: Optional[int] = None
         self.dense = dense
         self.separation = max(SEPARATION, self.rtol * self.model.mech.d_t)
         # ten times the absolute tolerance on w3 (rad/ms): see the arm_stops event
@@ -135,6 +156,52 @@ class HybridSimulator:
                 f'the stage used up its travel ({travel:g} mm from drive.start_position_mm = '
                 f'{drive.start_position_mm:g} to drive.travel_mm = {drive.travel_mm:g}, '
                 f'{t_travel * 1e-3:.3g} s at {drive.pull_speed_mm_per_s:g} mm/s)', 'travel')
+
+    def tendon_rate_per_ms(self) -> float:
+        """The fastest rate of the compliant tendon's own mode, |lambda| in 1/ms (0 for a rigid
+        tendon): its stiffness (and damping) against the inertia it moves through the linkage,
+        grad l_t^T M^-1 grad l_t, at the start pose (the arm latched: theta1 alone moves)."""
+        m, scene = self.model, self.scene
+        if m.rigid:
+            return 0.0
+        th1 = scene.initial.theta1_rad
+        th3_deg = scene.initial.theta3_deg
+        th3 = m.contact_angle if th3_deg is None else math.radians(th3_deg)
+        tg, mass = m.mech.tendon(th1, th3), m.mech.mass(th3)
+        if abs(th3 - m.contact_angle) < 1e-12:
+            mobility = tg.d1 * tg.d1 / mass.m11                      # 1/g
+        else:
+            u1, u3 = mass.solve(tg.d1, tg.d3)
+            mobility = tg.d1 * u1 + tg.d3 * u3
+        # N/mm = 1e-3 g/ms^2, N ms/mm = 1e-3 g/ms: lambda^2 + c lambda + w^2 = 0
+        w2 = 1e-3 * m.k_t * mobility
+        c = 1e-3 * m.c_t * mobility
+        return 0.5 * (c + math.sqrt(c * c - 4 * w2)) if c * c > 4 * w2 else math.sqrt(w2)
+
+    def _refuse_stiff_explicit(self) -> None:
+        """An explicit solver on a stiff compliant tendon: refused before it starts, with the
+        stability-limited step count it would need at the least (EXPLICIT_STIFF_STEP_BUDGET)."""
+        limit = EXPLICIT_STABILITY.get(self.method)
+        rate = self.tendon_rate_per_ms()
+        if limit is None or rate == 0.0:
+            return
+        steps = rate * self.t_end / limit
+        if steps > EXPLICIT_STIFF_STEP_BUDGET:
+            raise StiffSceneError(
+                f'integration.solver = {self.method} on tendon.stiffness_N_per_mm = '
+                f'{self.model.k_t:g}: the tendon against the inertia it moves has a time scale '
+                f'of {1e3 / rate:.3g} us, so this explicit solver needs at least ~{steps:,.0f} '
+                f'steps over the {self.t_end * 1e-3:.3g} s horizon (its stability limit; budget '
+                f'{EXPLICIT_STIFF_STEP_BUDGET:,}) and in practice tens of times more: '
+                f'{IMPLICIT_ADVICE}')
+
+    def _over_budget(self, t: float, phase: str) -> SimulationError:
+        advice = (IMPLICIT_ADVICE if self.method in EXPLICIT_STABILITY
+                  else 'loosen integration.rtol, or end the run sooner (integration.t_end_s)')
+        return SimulationError(
+            f'stopped at t = {t:.6f} ms in phase {phase}: the solver {self.method} (rtol '
+            f'{self.rtol:g}) used its budget of {MAX_RHS_EVALS:,} right-hand sides '
+            f'(mantis_sim.hybrid.MAX_RHS_EVALS), the scene is too stiff for it: {advice}')
 
     # --- mode systems ---------------------------------------------------------------------------
     def _constrained(self, mode: Mode) -> bool:
@@ -176,7 +243,7 @@ class HybridSimulator:
             return (d.th1, d.th3, d.w1, 0.0, y[0], y[1])
         return (y[0], d.th3, y[1], 0.0, y[2], y[3])
 
-    def _rhs(self, mode: Mode):
+    def _rhs(self, mode: Mode, phase: str):
         # float(t), y.tolist(): the model's scalar math runs on Python floats, several times
         # faster than on the numpy scalars the solver hands over (t, or iterating y).
         dyn = self._dynamics
@@ -192,6 +259,14 @@ class HybridSimulator:
             def rhs(t, y):
                 d = dyn(mode, float(t), y.tolist())
                 return [d.w1, d.w3, d.a1, d.a3, d.stage_power, d.loss_power]
+        if self.max_rhs_evals is None:
+            return rhs
+        model, budget, unbudgeted = self.model, self.max_rhs_evals, rhs
+
+        def rhs(t, y):
+            if model.rhs_evals > budget:
+                raise self._over_budget(float(t), phase)
+            return unbudgeted(t, y)
         return rhs
 
     def _events(self, mode: Mode, phase: str, after_peak: bool, start_stretch: float,
@@ -433,8 +508,12 @@ class HybridSimulator:
     def run(self) -> RawRun:
         """Simulate from the start pose to the peak tip speed (+ post_peak_ms) or t_end."""
         start = time.perf_counter()
-        self.start()
-        self.advance(self.t_end, stop_after_peak=True)
+        self.max_rhs_evals = self.model.rhs_evals + MAX_RHS_EVALS
+        try:
+            self.start()
+            self.advance(self.t_end, stop_after_peak=True)
+        finally:
+            self.max_rhs_evals = None
         run = self.run_data
         run.wall_time_s = time.perf_counter() - start
         if math.isnan(run.peak_time_ms):
@@ -520,7 +599,7 @@ class HybridSimulator:
         start_rate = tg.d1 * s[2] + tg.d3 * s[3] - l_free_dot
         events = self._events(mode, phase, after_peak, start_stretch, start_rate)
         try:
-            sol = self._solve_ivp(self._rhs(mode), (t0, t1), y0, method=self.method,
+            sol = self._solve_ivp(self._rhs(mode, phase), (t0, t1), y0, method=self.method,
                                   rtol=self.rtol, atol=atol, events=events,
                                   dense_output=self.dense)
         except ValueError as exc:

@@ -10,11 +10,14 @@ import numpy as np
 from .hybrid import PHASES, HybridSimulator, RawRun
 from .scene import Scene
 
-# The keys of `mantis sim --json`, exactly: other tools read them (issue 2).
+# The keys of `mantis sim --json`, exactly: other tools read them (issue 2); and WARNINGS.
 JSON_KEYS = ('status', 'reason', 'peak_tip_speed_mps', 'max_spring_energy_mJ',
              'deepest_body_angle_rad', 'peak_tendon_force_N', 'phase_start_s', 'phase_duration_s',
              'energy_balance_residual_mJ', 'wall_time_s', 'rhs_evals', 'effects', 'solver', 'rtol')
 STATUS_STRIKE, STATUS_NO_STRIKE = 'strike', 'no strike'
+# A list of lines, each a load the run asks of the rig that the rig cannot give (issue 30):
+# not a number, so not among JSON_KEYS (the sweep's table takes those as its columns).
+WARNINGS = 'warnings'
 
 
 @dataclass
@@ -49,8 +52,10 @@ class SimulationResult:
     simulator: Optional[HybridSimulator] = None
 
     def to_json_dict(self) -> dict:
-        """The stable subset of the metrics that `mantis sim --json` prints (JSON_KEYS)."""
-        return {key: self.metrics[key] for key in JSON_KEYS}
+        """The stable subset of the metrics that `mantis sim --json` prints (JSON_KEYS and
+        WARNINGS)."""
+        return {**{key: self.metrics[key] for key in JSON_KEYS},
+                WARNINGS: list(self.metrics[WARNINGS])}
 
     def _segment_at(self, t_ms: float):
         """The first segment whose span holds t_ms (None: outside the run)."""
@@ -129,6 +134,7 @@ def _metrics(sim: HybridSimulator, raw: RawRun, tr: Trajectory, rhs_evals: int) 
         if iv_state is not None:
             tendon_work_iv = peak_state[4] - iv_state[4]
     strike = tr.phase == 'IV'
+    peak_force = float(tr.tendon_force_N.max())
     return {
         'scene': raw.scene.name,
         'status': STATUS_STRIKE if peak_t is not None else STATUS_NO_STRIKE,
@@ -138,7 +144,8 @@ def _metrics(sim: HybridSimulator, raw: RawRun, tr: Trajectory, rhs_evals: int) 
         # The body's deepest turn before the strike: the angle from which a spring energy of
         # any convention (the lab's k_s/2 (theta1 - theta1_rest)^2) is computed.
         'deepest_body_angle_rad': float(tr.theta1[:_strike_end(tr)].min()),
-        'peak_tendon_force_N': float(tr.tendon_force_N.max()),
+        'peak_tendon_force_N': peak_force,
+        WARNINGS: force_warnings(raw.scene.loadcell.capacity_N, peak_force),
         'phase_start_s': {p: (v * 1e-3 if v is not None else None) for p, v in starts.items()},
         'phase_duration_s': durations,
         'peak_time_s': peak_t * 1e-3 if peak_t is not None else None,
@@ -159,6 +166,17 @@ def _metrics(sim: HybridSimulator, raw: RawRun, tr: Trajectory, rhs_evals: int) 
         'solver': sim.method,
         'rtol': sim.rtol,
     }
+
+
+def force_warnings(capacity_N: float, peak_force_N: float) -> list[str]:
+    """What the scene's own rig cannot take: a peak tendon force beyond its load cell's range
+    (the scene's loadcell.capacity_N). The rig's force ceiling is not the physics' to know:
+    the rig's command line adds that comparison."""
+    capacity = capacity_N
+    if peak_force_N <= capacity:
+        return []
+    return [f'peak tendon force {peak_force_N:.1f} N exceeds the load cell\'s range of '
+            f'{capacity:g} N (loadcell.capacity_N): more than the rig can apply or measure']
 
 
 def _strike_end(tr: Trajectory) -> int:

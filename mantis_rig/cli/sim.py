@@ -6,9 +6,11 @@ from pathlib import Path
 import sys
 
 from mantis_sim.parameters import SECTIONS, describe
-from mantis_sim.results import simulate
+from mantis_sim.results import WARNINGS, simulate
 from mantis_sim.scene import EFFECTS, available_scenes, load_scene
 from mantis_sim.studies import strike_report
+
+from ..contract import FORCE_CEILING
 
 
 def add_commands(commands) -> None:
@@ -47,15 +49,29 @@ def _scene_from_args(args):
     return load_scene(args.scene, overrides)
 
 
+def ceiling_warning(peak_force_n: float) -> list[str]:
+    """The rig's force ceiling (mantis_rig.contract.FORCE_CEILING, its one source) against a
+    simulated peak tendon force: [] if a trial at the default ceiling would not stop."""
+    name, default, top = FORCE_CEILING.name, FORCE_CEILING.default, FORCE_CEILING.range[1]
+    if peak_force_n <= default:
+        return []
+    text = (f'peak tendon force {peak_force_n:.1f} N is above the rig\'s force ceiling '
+            f'({name} = {default:g} N by default, at most {top:g} N): ')
+    if peak_force_n > top:
+        return [text + 'a trial on the rig stops the stage before this load']
+    return [text + f'a trial stops the stage before it unless {name} is raised']
+
+
 def run_sim(args) -> int:
     scene = _scene_from_args(args)
     result = simulate(scene)
+    warnings = result.metrics[WARNINGS] + ceiling_warning(result.metrics['peak_tendon_force_N'])
     if args.out:
         strike_report.write_trajectory_csv(result, args.out)
     if args.plot:
         strike_report.plot_trial(result, args.plot)
     if args.json:
-        print(json.dumps(result.to_json_dict()))
+        print(json.dumps({**result.to_json_dict(), WARNINGS: warnings}))
         if not result.metrics['strike_reached']:
             print(f'no strike: {result.metrics["reason"]}', file=sys.stderr)
     else:
@@ -63,6 +79,8 @@ def run_sim(args) -> int:
         for label, path in (('trajectory', args.out), ('plot', args.plot)):
             if path:
                 print(f'{label}: {path}')
+    for line in warnings:               # in the text, and beside the JSON on stderr
+        print(f'warning: {line}', file=sys.stderr if args.json else sys.stdout)
     return 0
 
 

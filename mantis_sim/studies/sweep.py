@@ -19,11 +19,15 @@ import time
 
 from mantis_sim.designs import ID_COLUMN, STATUS_OK, run_chunk
 from mantis_sim.errors import InputError
+from mantis_sim.results import force_warnings
 
 from .parallel import Progress, connect
 
 CHECKPOINT_S = 10.0
 CHUNK_TARGET_S = 0.5            # wall time of one chunk: scheduling costs ~ms per task
+# A design whose peak tendon force is beyond the load cell's range (mantis_sim.results
+# .force_warnings) says so here; '' otherwise.
+WARNING_COLUMN = 'warning'
 
 
 class SweepError(InputError):
@@ -99,8 +103,10 @@ def run_sweep(scene_name: str, overrides: list, designs: list[dict], out: Path, 
               progress: bool = True) -> SweepSummary:
     """Compute the designs ``out`` lacks and write the table (module docstring)."""
     from mantis_sim.designs import design_id
+    from mantis_sim.scene import load_scene
     out = Path(out)
-    earlier = {row[ID_COLUMN]: row for row in read_table(out)}
+    capacity_n = load_scene(scene_name, overrides).loadcell.capacity_N
+    earlier = {row[ID_COLUMN]: _with_warning(row, capacity_n) for row in read_table(out)}
     ids = [design_id(d) for d in designs]
     todo = [(i, d) for i, (i_d, d) in enumerate(zip(ids, designs)) if i_d not in earlier]
     rows = {i: earlier[i_d] for i, i_d in enumerate(ids) if i_d in earlier}
@@ -111,7 +117,7 @@ def run_sweep(scene_name: str, overrides: list, designs: list[dict], out: Path, 
     def finished(chunk_rows, positions):
         nonlocal strikes_s
         for pos, row in zip(positions, chunk_rows):
-            rows[pos] = row
+            rows[pos] = _with_warning(row, capacity_n)
             strikes_s += float(row.get('design_time_s') or 0.0)
         if bar:
             bar.advance(len(chunk_rows))
@@ -154,6 +160,14 @@ def run_sweep(scene_name: str, overrides: list, designs: list[dict], out: Path, 
                         ok=sum(r.get('status') == STATUS_OK for r in ordered),
                         wall_s=time.monotonic() - started, strikes_s=strikes_s,
                         workers=n_workers, where=where)
+
+
+def _with_warning(row: dict, capacity_n: float) -> dict:
+    """The row with its WARNING_COLUMN (the design's own load-cell range if it varies it)."""
+    force = row.get('peak_tendon_force_N')
+    capacity = row.get('loadcell.capacity_N', capacity_n)
+    lines = force_warnings(capacity, force) if force is not None else []
+    return {**row, WARNING_COLUMN: '; '.join(lines)}
 
 
 def _chunks(items: list, size: int):

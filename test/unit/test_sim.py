@@ -738,9 +738,11 @@ def test_cli_json_keys_are_exactly_the_issues(capsys):
                          'phase_start_s', 'phase_duration_s', 'energy_balance_residual_mJ',
                          'wall_time_s', 'rhs_evals', 'effects', 'solver', 'rtol',
                          # issue 24: a run's outcome and the body's deepest turn
-                         'status', 'reason', 'deepest_body_angle_rad'}
-    assert data['status'] == 'strike' and data['reason'] == ''
-    assert set(data) == set(JSON_KEYS)
+                         'status', 'reason', 'deepest_body_angle_rad',
+                         # issue 30: loads beyond the rig's load cell or force ceiling
+                         'warnings'}
+    assert data['status'] == 'strike' and data['reason'] == '' and data['warnings'] == []
+    assert set(data) == {*JSON_KEYS, 'warnings'}
     assert set(data['phase_start_s']) == set(PHASE_ORDER) == set(data['phase_duration_s'])
     assert data['effects'] == ['joint_damping', 'hinge_stiffness', 'fluid_drag', 'tendon_slack',
                                'contact_restitution']
