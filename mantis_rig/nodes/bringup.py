@@ -36,6 +36,7 @@ from mantis_rig.contract import CLOCK, FORCE_CEILING_NAME, FORCE_GUARD_NODES, re
 from mantis_rig.errors import StackError
 
 from .executors import STACK_PARENT_ENV, Spinner, light_executor, threaded_executor
+from .memory import limit_malloc_arenas
 from .node_table import DEVICES, SIM_RIG_PROCESS, STAGE_NODE, SUPERVISOR, WORLD
 from .sim_rig import DEVICE_THREADS, SimRig, release
 
@@ -119,6 +120,7 @@ def _overrides(values: dict) -> list:
 
 class Stack:
     def __init__(self, config: StackConfig, log_dir: Path | None = None):
+        limit_malloc_arenas()          # before the nodes' threads: a long bring-up stays flat
         self.config = config
         self.log_dir = log_dir
         self.nodes = []                       # the nodes this stack made itself

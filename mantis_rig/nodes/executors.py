@@ -33,6 +33,7 @@ from mantis_rig.errors import USAGE_ERROR, ConfigurationError, InputError
 from mantis_rig.nodes.ros_env import claim_local_domain
 
 from .lean_node import LeanNode
+from .memory import limit_malloc_arenas
 from .stopping import PROCESS_STOPPING, StopRequested, StopSignals, watch_parent
 
 NODE_THREADS = 4        # a device node process: its blocking services and backend waits
@@ -141,6 +142,7 @@ def run_node(node_class, args=None, make_executor=None) -> int:
     context goes; the exit status is then 130 or 143. A node process of a stack also stops when
     the stack's process is gone."""
     claim_local_domain()
+    limit_malloc_arenas()          # before the node's threads: a long bring-up stays flat
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     signals = StopSignals(node_class.__name__,

@@ -38,6 +38,7 @@ from mantis_rig.trial.sequence import SessionState, TrialSequence
 
 from .executors import SideNode, light_executor, run_node
 from .lean_node import WithoutDefaultEventHandlers
+from .memory import release_freed_memory
 from .recorder import Recorder
 from .rig_client import RigClient
 
@@ -231,6 +232,7 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
             self.last_abort_reason = outcome.get('reason', '')
         self.get_logger().info(f'trial {number} {outcome.get("result")}: '
                                f'{outcome.get("reason") or "ok"}; log closed: {path}')
+        release_freed_memory()
 
     def _on_recorded(self, topic: str, data: bytes) -> None:
         watched = self._watched.get(topic)
