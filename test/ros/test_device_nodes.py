@@ -475,9 +475,11 @@ def test_services_refuse_in_the_wrong_state(rig):
 # --- hardware backends against the KDC101 emulator and the fake nidaqmx ----------------------
 
 @pytest.mark.slow
-def test_hardware_stage_node_on_the_kdc101_emulator(rig):
+@pytest.mark.parametrize('streams_status', [True, False], ids=['streaming', 'polled'])
+def test_hardware_stage_node_on_the_kdc101_emulator(rig, streams_status):
+    """Also against a controller that ignores HW_START_UPDATEMSGS: the driver polls it."""
     from fakes.kdc101_emulator import Kdc101Emulator
-    emulator = Kdc101Emulator(position_mm=5.0).start()
+    emulator = Kdc101Emulator(position_mm=5.0, streams_status=streams_status).start()
     try:
         # The stale-force guard gets 5 s: on a loaded machine the feeder's 5 N blocks once
         # reached the node 0.66 s apart and its 0.5 s guard faulted before the 31 N block
@@ -517,6 +519,8 @@ def test_hardware_stage_node_on_the_kdc101_emulator(rig):
         rig.velocity.publish(Float64(data=2e-3))
         rig.wait_for(lambda: rig.messages(resolve(JOINT_STATE))[-1].position[0] > 0.2e-3,
                      'the stage to move', 30.0)
+        if not streams_status:           # the positions came from answered polls
+            assert emulator.status_requests_answered > 3
         # a block over the ceiling (30 N) stops it, in the driver layer: an ERROR, latched; the
         # stage stays open and active, and refuses to pull until it is activated again
         feeding.set()
