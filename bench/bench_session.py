@@ -1,7 +1,7 @@
 """A lab's day on the simulated rig: one `mantis bringup`, many trials, then Ctrl-C.
 
-    .venv/bin/python bench/bench_session.py [--trials 20] [--processes single|multi]
-                                            [--write] [--keep DIR]
+    .venv/bin/python bench/bench_session.py [--trials 20] [--processes single multi]
+                                            [--multi-trials N] [--write] [--keep DIR]
 
 Starts ``mantis bringup --backend sim --real-time-factor 0`` (loopback DDS, a domain of its
 own), starts each trial over /supervisor/start_trial once the previous one has ended, and
@@ -168,6 +168,8 @@ HEADER = ('| layout | trials | done | bags analysed | tree RSS MiB: first / seco
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--trials', type=int, default=20)
+    parser.add_argument('--multi-trials', type=int,
+                        help='trials in the multi-process layout (default: --trials)')
     parser.add_argument('--processes', choices=('single', 'multi'), nargs='+',
                         default=['single'])
     parser.add_argument('--write', action='store_true',
@@ -180,7 +182,9 @@ def main() -> int:
     try:
         for processes in args.processes:
             out = Path(tempfile.mkdtemp(prefix=f'session_{processes}_', dir=args.keep))
-            result = run_session(args.trials, processes, out)
+            trials = args.multi_trials if processes == 'multi' and args.multi_trials \
+                else args.trials
+            result = run_session(trials, processes, out)
             analysed = analyse(out)
             line = report(result, processes, analysed)
             print(HEADER + '\n' + line)
