@@ -35,7 +35,9 @@ Units at this interface are SI (s, m, N); inside, mantis_sim's g, mm, ms.
 """
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 import math
 
 import numpy as np
@@ -52,6 +54,18 @@ DEFAULT_HISTORY_S = 2.0
 SETTLE_AFTER_PEAK_MS = 20.0
 # The stage counts as back at its start (the robot can be re-latched) this close to it.
 RELATCH_TOLERANCE_MM = 0.01
+KEPT_STRIKES = 8                # the truths of this many past strikes stay readable
+
+
+@dataclass(frozen=True)
+class StrikeTruth:
+    """What one latching of the robot did, on the rig's clock (s): the truth a simulated
+    trial's analysis is judged against."""
+
+    number: int
+    phase_start_s: dict
+    events: list
+    peak_time_s: float
 
 # Where the markers sit: (across, along) mm in the body frame (along = a->b), and in the arm
 # frame (across, along the arm axis from b towards the tip). Like the real rig's five markers.
@@ -74,6 +88,7 @@ class World:
         self._start_position_mm = scene.drive.start_position_mm
         self._t_ms = 0.0
         self._strikes: list[_Strike] = [_Strike(scene, self._drive, 0.0)]
+        self._past: deque[StrikeTruth] = deque(maxlen=KEPT_STRIKES)
 
     # --- time and the stage ---------------------------------------------------------------
     @property
@@ -134,6 +149,7 @@ class World:
         return self.held and velocity == 0.0 and abs(pulled_mm) <= RELATCH_TOLERANCE_MM
 
     def _relatch(self) -> None:
+        self._past.append(self._current.truth())
         scene = self._relatch_scene(self.strikes + 1)
         self._strikes.append(_Strike(scene, self._drive, self._t_ms, self.strikes + 1))
 
@@ -144,20 +160,25 @@ class World:
 
     @property
     def phase_start_s(self) -> dict:
-        strike = self._current
-        return {k: strike.world_ms(v) * 1e-3
-                for k, v in strike.sim.run_data.phase_start_ms.items()}
+        return self._current.truth().phase_start_s
 
     @property
     def events(self) -> list:
         """(name, t_s) of every event of the current strike: unlatch, overcenter, peak, ..."""
-        strike = self._current
-        return [(name, strike.world_ms(t) * 1e-3) for name, t, _ in strike.sim.run_data.events]
+        return self._current.truth().events
 
     @property
     def peak_time_s(self) -> float:
-        strike = self._current
-        return strike.world_ms(strike.sim.run_data.peak_time_ms) * 1e-3
+        return self._current.truth().peak_time_s
+
+    @property
+    def last_strike(self) -> StrikeTruth | None:
+        """The truth of the latest latching that struck (the current one once it has peaked,
+        else the one before the re-latch); None before any strike."""
+        current = self._current.truth()
+        if math.isfinite(current.peak_time_s):
+            return current
+        return self._past[-1] if self._past else None
 
     def tendon_force_N(self, times_s) -> np.ndarray:
         """True tendon tension at each time (within the kept history, not past time_s)."""
@@ -183,9 +204,11 @@ class World:
 
     # --- internals -------------------------------------------------------------------------
     def _by_strike(self, times_ms: np.ndarray):
-        """(strike, indices of the times that fall in it) for each strike that has some."""
+        """(strike, indices of the times that fall in it) for each strike that has some. The
+        instant of a re-latch belongs to the strike before it: the new one is simulated only
+        from there on."""
         starts = [strike.t0_ms for strike in self._strikes]
-        index = np.searchsorted(starts, times_ms, side='right') - 1
+        index = np.searchsorted(starts, times_ms, side='left') - 1
         for i in np.unique(index):
             yield self._strikes[max(i, 0)], np.flatnonzero(index == i)
 
@@ -260,6 +283,13 @@ class _Strike:
 
     def world_ms(self, t_ms: float) -> float:
         return t_ms + self.t0_ms
+
+    def truth(self) -> StrikeTruth:
+        run = self.sim.run_data
+        return StrikeTruth(
+            self.number, {k: self.world_ms(v) * 1e-3 for k, v in run.phase_start_ms.items()},
+            [(name, self.world_ms(t) * 1e-3) for name, t, _ in run.events],
+            self.world_ms(run.peak_time_ms) * 1e-3)
 
     def drive_changed(self, world_t_ms: float) -> None:
         if self.held is None:

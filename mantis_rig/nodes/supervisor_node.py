@@ -217,8 +217,8 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
                   f'{failure.cause.strerror or failure.cause}; stage stopped; '
                   f'{failure.durable_messages} messages written before the failure')
         self.get_logger().error(reason)
-        if sequence is not None:
-            sequence.abort(reason)
+        if sequence is not None:          # no return: a move the log cannot hold
+            sequence.abort(reason, return_stage=False)
 
     def _close_log(self, outcome: dict, number: int, bag: BagWriter, path: Path) -> None:
         """Close trial ``number``'s log ``bag`` (at ``path``), and say so in one line."""

@@ -53,9 +53,9 @@ def trial(tmp_path_factory):
         stack.start()
         started, message, final = client.run_trial(timeout_s=TRIAL_TIMEOUT_S)
         assert started and final == 'done', (message, final, client.states)
-        world = stack.node(SIM_WORLD_NODE).world
-        truth = {'phase_start_s': world.phase_start_s, 'events': dict(world.events),
-                 'peak_time_s': world.peak_time_s}
+        struck = stack.node(SIM_WORLD_NODE).world.last_strike     # re-latched since
+        truth = {'phase_start_s': struck.phase_start_s, 'events': dict(struck.events),
+                 'peak_time_s': struck.peak_time_s}
     finally:
         stack.stop()
         client.destroy_node()

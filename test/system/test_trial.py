@@ -196,8 +196,7 @@ def test_air_23mm_trial_in_one_process(ros, tmp_path):
         assert not ok and 'a trial is in progress' in reason, reason
         wait_for(client, 'done', mark)
         wait_closed(bag)
-        world = stack.node(SIM_WORLD_NODE).world
-        peak_time_s = world.peak_time_s
+        peak_time_s = stack.node(SIM_WORLD_NODE).world.last_strike.peak_time_s
         assert client.call('abort') == (
             False, 'no trial in progress (state waiting_for_relatch)')
     finally:
@@ -274,7 +273,10 @@ def test_force_ceiling_below_the_peak_aborts(ros, tmp_path):
     assert commands[-1] == 0.0
     states = [m.message for m in reader.messages([resolve(JOINT_STATE)])]
     assert states[-1].velocity[0] == 0.0
-    assert 'returning' not in [m.message.data for m in reader.messages([resolve(SUPERVISOR_STATE)])]
+    # stopped first, then returned to the start for the next trial: in the bag before it closed
+    assert outcome['stage_returned'] == 'true'
+    logged = [m.message.data for m in reader.messages([resolve(SUPERVISOR_STATE)])]
+    assert logged[-2:] == ['returning', 'aborted'], logged
     check_rosbags_decodes_everything(bag)
 
 

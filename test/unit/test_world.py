@@ -277,3 +277,27 @@ def test_a_robot_left_unlatched_holds_no_tension_on_the_next_pull():
     assert np.all(world.tendon_force_N(times) == 0.0)
     th1, th3 = world.joint_angles_rad(times)
     assert np.ptp(th1) == 0.0 and np.ptp(th3) == 0.0
+
+
+def test_the_last_strikes_truth_stays_readable_after_the_relatch():
+    world = World(load_scene('air_23mm_rig'))
+    assert world.last_strike is None
+    t, peak_s, _ = _strike_then_return(world)
+    struck = world.last_strike
+    assert world.strikes == 2 and struck.number == 1
+    assert 'IV' in struck.phase_start_s and 'II' not in world.phase_start_s
+    assert struck.peak_time_s == pytest.approx(peak_s, abs=1e-9)
+
+
+def test_the_instant_of_the_relatch_is_readable():
+    """The load cell asks for the world up to now, which may be the re-latch's own instant."""
+    world = World(load_scene('air_23mm_rig'))
+    t, _, _ = _strike_then_return(world)
+    while world.strikes == 2:                        # one more step: re-latched at its end
+        _strike_then_return(world, t=t)
+        break
+    now = world.time_s
+    relatched = [s.t0_ms * 1e-3 for s in world._strikes[1:]]
+    times = np.array(relatched + [now])
+    assert np.all(np.isfinite(world.tendon_force_N(times)))
+    assert np.all(np.isfinite(world.joint_angles_rad(times)[0]))
