@@ -11,6 +11,7 @@ import csv
 import io
 from pathlib import Path
 import threading
+import time
 
 import pytest
 from rcl_interfaces.msg import Parameter as ParameterMsg
@@ -66,10 +67,19 @@ def session(tmp_path, processes='single', world=None, **supervisor):
 
 
 def run_trial(client):
-    """(final state, the supervisor's reason, the bag) of one trial started over ROS."""
+    """(final state, the supervisor's reason, the bag, closed) of one trial started over ROS."""
     started, message, final = client.run_trial(timeout_s=TRIAL_TIMEOUT_S)
     assert started, message
-    return final, client.reason, Path(message.rsplit('logging to ', 1)[1])
+    bag = Path(message.rsplit('logging to ', 1)[1])
+    wait_closed(bag)                # the final state is published before the log closes
+    return final, client.reason, bag
+
+
+def wait_closed(bag, timeout_s=30.0):
+    deadline = time.monotonic() + timeout_s
+    while not (bag / 'metadata.yaml').exists():
+        assert time.monotonic() < deadline, f'{bag} was not closed'
+        time.sleep(0.05)
 
 
 def set_supervisor(client, name, value):

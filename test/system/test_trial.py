@@ -197,6 +197,8 @@ def test_air_23mm_trial_in_one_process(ros, tmp_path):
         wait_for(client, 'done', mark)
         wait_closed(bag)
         peak_time_s = stack.node(SIM_WORLD_NODE).world.last_strike.peak_time_s
+        # it struck: once its log is closed the supervisor waits for the robot's re-latch
+        assert client.wait_for_state(('waiting_for_relatch',), mark, 30.0)
         assert client.call('abort') == (
             False, 'no trial in progress (state waiting_for_relatch)')
     finally:
