@@ -94,7 +94,8 @@ def run_session(trials: int, processes: str, out: Path) -> dict:
     import threading
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
-    rows, finals = [], []
+    rows, finals, refused = [], [], []
+    tree: list[int] = []
     try:
         if not client.wait_for_supervisor(120.0):
             raise SystemExit('the supervisor did not come up within 120 s')
@@ -102,8 +103,11 @@ def run_session(trials: int, processes: str, out: Path) -> dict:
         for i in range(trials):
             started = time.perf_counter()
             ok, message, final = client.run_trial(TRIAL_TIMEOUT_S)
-            if not ok:
-                raise SystemExit(f'trial {i + 1} was not started: {message}')
+            if not ok:                  # said, counted, and the session goes on
+                refused.append(f'trial {i + 1}: {message}')
+                print(f'trial {i + 1:4d}: not started: {message}', flush=True)
+                client.wait_for_state(('done', 'aborted'), client.trial_start, TRIAL_TIMEOUT_S)
+                continue
             finals.append((final, client.reason))
             usage = tree_usage(bringup.pid)
             usage['wall_s'] = time.perf_counter() - started
@@ -126,10 +130,14 @@ def run_session(trials: int, processes: str, out: Path) -> dict:
         time.sleep(1.0)
         left = [pid for pid in tree if Path(f'/proc/{pid}').exists()]
     finally:
+        if bringup.poll() is None:       # the bench itself failed: leave nothing running
+            bringup.kill()
+            bringup.wait()
         executor.shutdown()
         client.destroy_node()
         rclpy.try_shutdown()
-    return {'rows': rows, 'finals': finals, 'exit': bringup.returncode, 'left': left,
+    return {'rows': rows, 'finals': finals, 'refused': refused, 'exit': bringup.returncode,
+            'left': left,
             'last_line': stderr.strip().splitlines()[-1] if stderr.strip() else ''}
 
 
@@ -147,9 +155,11 @@ def report(result: dict, processes: str, analysed: tuple[int, int]) -> str:
     rows = result['rows']
     first, second, last = rows[0], rows[min(1, len(rows) - 1)], rows[-1]
     done = sum(final == 'done' for final, _ in result['finals'])
+    unconfirmed = len(result['refused'])
     growth = 100.0 * (last['rss_mib'] - second['rss_mib']) / second['rss_mib']
     lines = [
-        f'| {processes} | {len(rows)} | {done} | {analysed[0]} of {analysed[1]} | '
+        f'| {processes} | {len(rows) + unconfirmed} | {done} | {unconfirmed} | '
+        f'{analysed[0]} of {analysed[1]} | '
         f'{first["rss_mib"]:.0f} / {second["rss_mib"]:.0f} / {last["rss_mib"]:.0f} '
         f'({growth:+.1f} %) | {first["fds"]} / {second["fds"]} / {last["fds"]} | '
         f'{first["shm_files"]} / {last["shm_files"]} | '
@@ -159,10 +169,11 @@ def report(result: dict, processes: str, analysed: tuple[int, int]) -> str:
     return '\n'.join(lines)
 
 
-HEADER = ('| layout | trials | done | bags analysed | tree RSS MiB: first / second / last '
+HEADER = ('| layout | trials | done | starts not confirmed | bags analysed | '
+          'tree RSS MiB: first / second / last '
           '(second to last) | fds: first / second / last | shm files: first / last | '
           'CPU s per trial: first / second / last | after Ctrl-C |\n'
-          '|---|---|---|---|---|---|---|---|---|')
+          '|---|---|---|---|---|---|---|---|---|---|')
 
 
 def main() -> int:
@@ -192,6 +203,8 @@ def main() -> int:
             bad = [(i + 1, f, r) for i, (f, r) in enumerate(result['finals']) if f != 'done']
             for number, final, reason in bad:
                 print(f'trial {number}: {final}: {reason}')
+            for line in result['refused']:
+                print(f'not started (the start was not confirmed): {line}')
             lines.append(line)
     finally:
         release_domain(domain)
