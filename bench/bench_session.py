@@ -85,8 +85,11 @@ def run_session(trials: int, processes: str, out: Path) -> dict:
     command = [sys.executable, '-m', 'mantis_rig.cli', 'bringup', '--backend', 'sim',
                '--processes', processes, '--real-time-factor', '0', '--out', str(out),
                '--log-dir', str(out / 'logs')]
-    bringup = subprocess.Popen(command, cwd=REPO, env=env, stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True)
+    # to a file: a pipe nobody reads until the end fills after ~130 trials of log lines, and
+    # the supervisor's next log line then blocks its trial thread for good
+    output = out / 'bringup.log'
+    bringup = subprocess.Popen(command, cwd=REPO, env=env, stdout=output.open('w'),
+                               stderr=subprocess.STDOUT, text=True)
     rclpy.init()
     client = TrialClient()
     executor = SingleThreadedExecutor()
@@ -123,10 +126,10 @@ def run_session(trials: int, processes: str, out: Path) -> dict:
         tree = process_tree(bringup.pid)
         bringup.send_signal(signal.SIGINT)
         try:
-            _, stderr = bringup.communicate(timeout=30)
+            bringup.wait(timeout=30)
         except subprocess.TimeoutExpired:
             bringup.kill()
-            _, stderr = bringup.communicate()
+            bringup.wait()
         time.sleep(1.0)
         left = [pid for pid in tree if Path(f'/proc/{pid}').exists()]
     finally:
@@ -138,7 +141,12 @@ def run_session(trials: int, processes: str, out: Path) -> dict:
         rclpy.try_shutdown()
     return {'rows': rows, 'finals': finals, 'refused': refused, 'exit': bringup.returncode,
             'left': left,
-            'last_line': stderr.strip().splitlines()[-1] if stderr.strip() else ''}
+            'last_line': _last_line(output)}
+
+
+def _last_line(path: Path) -> str:
+    lines = path.read_text(errors='replace').strip().splitlines()
+    return lines[-1] if lines else ''
 
 
 def analyse(out: Path) -> tuple[int, int]:
