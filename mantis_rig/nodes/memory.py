@@ -1,14 +1,14 @@
 """Keeping a long bring-up's memory flat (glibc's allocator; elsewhere these do nothing).
 
-A lab runs hundreds of trials on one bring-up. Each trial's threads, bags and integrations
-allocate and free tens of MiB; with glibc's default of up to eight arenas per core, freed
-memory stays spread over arenas that threads rarely come back to, and the resident memory of
-the process crept up by about 2 MiB a trial for the first dozens of trials with nothing leaked
-(tracemalloc saw 0.2 MiB a trial; the thread count stays bounded). Two arenas
-(``limit_malloc_arenas``, called before the node threads start) and handing the freed pages
-back at the end of each trial (``release_freed_memory``) keep it flat: figures in
-docs/session_benchmark.md. Python holds the GIL for nearly every allocation, so two arenas
-cost no contention worth measuring.
+A lab runs hundreds of trials on one bring-up, and each trial's threads, bags and integrations
+allocate and free tens of MiB. With glibc's default of up to eight arenas per core, memory
+freed by short-lived threads stays spread over arenas and the resident memory creeps up.
+Measured over 20 trials on one bring-up (while scipy 1.17.1's LSODA still leaked, which was
+the larger part; requirements.txt pins 1.16.3): +22 % with the defaults, +10 % with two arenas
+(``limit_malloc_arenas``, called before the node threads start) and the freed pages handed
+back at the end of each trial (``release_freed_memory``). Python holds the GIL for nearly
+every allocation, so two arenas cost no contention worth measuring. A whole session:
+docs/session_benchmark.md.
 """
 from __future__ import annotations
 
