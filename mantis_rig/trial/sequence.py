@@ -77,6 +77,10 @@ class TrialAborted(Exception):
     pass
 
 
+class _ReturnEnded(Exception):
+    """The return after an abort ends where the stage is (a second abort, its time is up)."""
+
+
 class Pending:
     """The answer to a request, set later from another thread: (ok, message) or a value."""
 
@@ -149,7 +153,6 @@ class TrialSequence:
         self.marker_frames = 0
         self.device_messages: dict[str, str] = {}
         self.device_in_error: dict[str, bool] = {}
-        self.stage_returned = ''
         self._trigger_call: Pending | None = None
 
     # ------------------------------------------------------------------ status
@@ -385,9 +388,12 @@ class TrialSequence:
         if self.session.start_position_m is None:
             self.session.start_position_m = self.start_position_m
 
-    def _move_to(self, target_m: float, what: str) -> float:
+    def _move_to(self, target_m: float, what: str,
+                 wait: Callable[[Callable[[], bool]], None] | None = None) -> float:
         """Move to target_m and let the stage settle; retry a move that ends outside the
-        tolerance (MOVE_ATTEMPTS in all). Return the remaining error, m."""
+        tolerance, or never starts (MOVE_ATTEMPTS in all). Return the remaining error, m.
+        ``wait(ready)`` waits for each move (default: :meth:`_wait`, which ends on an abort)."""
+        wait = wait or (lambda ready: self._wait(ready, what))
         tolerance_m = self.conditions.position_tolerance_mm * 1e-3
         for _ in range(MOVE_ATTEMPTS):
             self.rig.move_to(target_m)
@@ -401,7 +407,7 @@ class TrialSequence:
                 return self._at_rest() and SETTLED_S <= self.rig.now_s() - self._last_motion \
                     and SETTLED_S <= self.rig.now_s() - since[0]
 
-            self._wait(settled, what)
+            wait(settled)
             error_m = self.stage_position_m - target_m
             if abs(error_m) < tolerance_m:
                 break
@@ -490,16 +496,16 @@ class TrialSequence:
         self.return_error_m = self._move_to(self.start_position_m, 'return to the start position')
 
     def _finish(self, state: str, result: str, reason: str) -> dict:
-        stage_stopped = None
+        stage_stopped = stage_returned = None
         if state == 'aborted':
             stage_stopped = self._stop_and_confirm()
             if self._return_after_abort:
-                self.stage_returned = self._return_after_an_abort()
+                stage_returned = self._return_after_an_abort()
         outcome = self._outcome(result, reason)
         if stage_stopped is not None:
             outcome['stage_stopped'] = stage_stopped
-        if self.stage_returned:
-            outcome['stage_returned'] = self.stage_returned
+        if stage_returned:
+            outcome['stage_returned'] = stage_returned
         self._set_state(state, reason)
         self.outcome = outcome
         try:
@@ -513,8 +519,8 @@ class TrialSequence:
     def _return_after_an_abort(self) -> str:
         """Take the stage back to the trial's start after an abort, at the stage's move speed,
         so that the next trial finds it there: 'true', or why not. A move that does not start,
-        or ends short (the abort's own stop call may reach the stage after it), is sent again,
-        MOVE_ATTEMPTS in all. A second abort ends the attempt where the stage is."""
+        or ends short (the abort's own stop call may reach the stage after it), is sent again
+        (:meth:`_move_to`). A second abort ends the attempt where the stage is."""
         target = self.start_position_m
         if target is None or self.stage_position_m is None:
             return ''
@@ -523,23 +529,22 @@ class TrialSequence:
             return 'true'
         self._set_state('returning', self.reason)
         deadline = time.monotonic() + self.conditions.phase_timeout_s
-        for _ in range(MOVE_ATTEMPTS):
-            self.rig.move_to(target)
-            sent = self._command_sent()
-            while True:
+
+        def wait(ready: Callable[[], bool]) -> None:
+            while not ready():
                 if self._stop_return.is_set():
-                    return 'false: stopped by a second abort'
+                    raise _ReturnEnded('stopped by a second abort')
                 if time.monotonic() > deadline:
                     self.rig.stop_stage()
-                    return f'false: not back within {self.conditions.phase_timeout_s} s'
-                rested = self._at_rest() and SETTLED_S <= self.rig.now_s() - self._last_motion
-                if rested and abs(self.stage_position_m - target) < tolerance_m:
-                    return 'true'
-                moved = self._last_motion > sent[0]
-                if (not moved and self._not_acted_on(sent)) or (
-                        moved and rested and SETTLED_S <= self.rig.now_s() - sent[0]):
-                    break                       # not started, or ended short: send it again
+                    raise _ReturnEnded(f'not back within {self.conditions.phase_timeout_s} s')
                 time.sleep(POLL_S)
+
+        try:
+            error_m = self._move_to(target, 'return to the start', wait)
+        except _ReturnEnded as ended:
+            return f'false: {ended}'
+        if abs(error_m) < tolerance_m:
+            return 'true'
         return 'false: the stage did not reach the start' + self._device_hint(STAGE_NODE)
 
     def _stop_and_confirm(self) -> str:
