@@ -20,6 +20,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 
 REPO = Path(__file__).resolve().parents[1]
@@ -94,7 +95,6 @@ def run_session(trials: int, processes: str, out: Path) -> dict:
     client = TrialClient()
     executor = SingleThreadedExecutor()
     executor.add_node(client)
-    import threading
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
     rows, finals, refused = [], [], []

@@ -191,18 +191,24 @@ class World:
     def marker_positions_m(self, times_s) -> dict:
         """Marker positions (name -> (n, 2) m) in the camera frame at each time: the one place
         the markers leave the simulation's millimetres for SI (docs/data_path.md)."""
-        th1, th3 = self.joint_angles_rad(times_s)
-        return {name: xy * 1e-3 for name, xy in self._markers_mm(th1, th3).items()}
+        th1, th3, l1_mm = self._pose(times_s)
+        return {name: xy * 1e-3 for name, xy in self._markers_mm(th1, th3, l1_mm).items()}
 
     def joint_angles_rad(self, times_s) -> tuple[np.ndarray, np.ndarray]:
         """(theta1, theta3) at each time (within the kept history, not past time_s)."""
-        times_ms = self._check_times(times_s)
-        th1, th3 = np.empty(times_ms.size), np.empty(times_ms.size)
-        for strike, at in self._by_strike(times_ms):
-            th1[at], th3[at] = strike.joint_angles_rad(times_ms[at])
+        th1, th3, _ = self._pose(times_s)
         return th1, th3
 
     # --- internals -------------------------------------------------------------------------
+    def _pose(self, times_s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(theta1, theta3, the body's L1 mm) at each time, each from the robot latched then."""
+        times_ms = self._check_times(times_s)
+        th1, th3, l1_mm = (np.empty(times_ms.size) for _ in range(3))
+        for strike, at in self._by_strike(times_ms):
+            th1[at], th3[at] = strike.joint_angles_rad(times_ms[at])
+            l1_mm[at] = strike.mech.L1
+        return th1, th3, l1_mm
+
     def _by_strike(self, times_ms: np.ndarray):
         """(strike, indices of the times that fall in it) for each strike that has some. The
         instant of a re-latch belongs to the strike before it: the new one is simulated only
@@ -225,10 +231,10 @@ class World:
                 f'{latest * 1e-3:.6f} s (history {self.history_s} s)')
         return np.clip(times_ms, earliest, latest)
 
-    def _markers_mm(self, th1: np.ndarray, th3: np.ndarray) -> dict:
+    @staticmethod
+    def _markers_mm(th1: np.ndarray, th3: np.ndarray, l1_mm: np.ndarray) -> dict:
         """Marker positions (name -> (n, 2) mm, camera frame) for arrays of joint angles."""
-        L1 = self._current.sim.model.mech.L1
-        b = (L1 * np.cos(th1), L1 * np.sin(th1))
+        b = (l1_mm * np.cos(th1), l1_mm * np.sin(th1))
         frames = {'mb': ((0.0, 0.0), th1), 'ma': (b, th1 + math.pi - th3)}
         out = {}
         for name, (across, along) in {**BODY_MARKERS_MM, **ARM_MARKERS_MM}.items():
