@@ -177,3 +177,12 @@ def rewritten_copy(bag, dest, replace=lambda message: message.data, conditions=N
             out.write_serialized(channel.topic, data, message.log_time)
     assert seen >= 2
     return dest
+
+
+@pytest.fixture
+def ros(own_ros_domain):
+    """rclpy's default context for one test, in the test's own domain (claimed first)."""
+    import rclpy
+    rclpy.init()
+    yield
+    rclpy.try_shutdown()

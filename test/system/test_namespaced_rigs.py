@@ -14,7 +14,6 @@ condition (a state, a closed bag), none on a fixed time.
 from pathlib import Path
 
 import pytest
-import rclpy
 from test_trial import FAST, FAST_RETURN, SCENE, TRIAL_TIMEOUT_S, bag_of, wait_closed
 
 from mantis_rig import contract
@@ -29,13 +28,6 @@ pytestmark = [pytest.mark.timeout(600), pytest.mark.slow, pytest.mark.ros]
 
 RIGS = {'/rig_a': 2.33, '/rig_b': 1.9}       # namespace -> pull speed, mm/s
 PROCESSES = {'/rig_a': 'single', '/rig_b': 'multi'}
-
-
-@pytest.fixture
-def ros():
-    rclpy.init()
-    yield
-    rclpy.try_shutdown()
 
 
 def start_rig(namespace, pull_speed_mm_s, out: Path):

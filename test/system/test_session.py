@@ -41,13 +41,6 @@ START_TOLERANCE_M = 0.1e-3            # the supervisor's position_tolerance_mm
 pytestmark = [pytest.mark.timeout(900), pytest.mark.slow, pytest.mark.ros]
 
 
-@pytest.fixture
-def ros():
-    rclpy.init()
-    yield
-    rclpy.try_shutdown()
-
-
 @contextlib.contextmanager
 def session(tmp_path, processes='single', world=None, **supervisor):
     config = StackConfig(scene=SCENE, processes=processes, real_time_factor=0.0,

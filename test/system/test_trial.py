@@ -26,7 +26,6 @@ import pytest
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
-import rclpy
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.typesys import Stores, get_typestore
 
@@ -59,13 +58,6 @@ TRIAL_TIMEOUT_S = 240.0
 FAST_RETURN = {STAGE_NODE: {'move_speed_m_per_s': 2.0e-3}}
 
 pytestmark = [pytest.mark.timeout(600), pytest.mark.slow, pytest.mark.ros]
-
-
-@pytest.fixture
-def ros():
-    rclpy.init()
-    yield
-    rclpy.try_shutdown()
 
 
 def start_stack(tmp_path, processes='single', rtf=RTF, **supervisor):
