@@ -12,7 +12,8 @@ import statistics
 from .results import simulate
 from .scene import load_scene
 
-SOLVERS = ('RK23', 'RK45', 'DOP853', 'LSODA', 'Radau', 'BDF')
+# scipy's solvers, and the fast path (the compiled Radau of mantis_sim.fast)
+SOLVERS = ('RK23', 'RK45', 'DOP853', 'LSODA', 'Radau', 'BDF', 'fast')
 TOLERANCES = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
 # Implicit methods with finite-difference Jacobians get slow at tight tolerances; beyond these
 # they add nothing to the front.

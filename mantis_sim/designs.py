@@ -131,7 +131,7 @@ def run_design(scene: Scene, values: dict) -> dict:
     row = {ID_COLUMN: design_id(values), **values}
     started = time.perf_counter()
     try:
-        result = simulate(scene.with_overrides([f'{k}={v!r}' for k, v in values.items()]))
+        result = simulate(scene.with_values(values))
     except (SimulationError, InputError, ArithmeticError, ValueError) as exc:
         row.update(status=STATUS_FAILED, reason=f'{type(exc).__name__}: {exc}',
                    wall_time_s=time.perf_counter() - started,

@@ -17,6 +17,18 @@ from typing import Optional
 
 import numpy as np
 
+from .fast.layout import (
+    EV_ARM_STOPS,
+    EV_LATCH_MARGIN,
+    EV_MAX_CONTRACTION,
+    EV_OVERCENTER,
+    EV_PEAK,
+    EV_RECONTACT,
+    EV_SLIP,
+    EV_STRETCH,
+    EV_TAUT_TENSION,
+    EV_TENSION,
+)
 from .model import Dynamics, Model, SimulationError
 from .parameters import ParameterError
 from .scene import Scene
@@ -56,7 +68,8 @@ EXPLICIT_STABILITY = {'RK23': 2.5, 'RK45': 3.3, 'DOP853': 6.4}
 # air_23mm_compliant: 23 000 steps, 12 s at 1e3 N/mm; 86 000, 43 s at 1e4; 315 000, 150 s at
 # 1e5), where Radau takes ~500 steps at any stiffness.
 EXPLICIT_STIFF_STEP_BUDGET = 3000
-IMPLICIT_ADVICE = 'use integration.solver=Radau (or LSODA/BDF)'
+IMPLICIT_ADVICE = ("use an implicit solver: integration.solver=fast, or scipy's Radau "
+                   '(or LSODA/BDF)')
 # The backstop of run(): no scene integrates for ever. The shipped scenes take 500-3 000
 # right-hand sides, the tightest tolerances of `mantis bench accuracy` up to ~600 000.
 MAX_RHS_EVALS = 2_000_000
@@ -118,6 +131,12 @@ class HybridSimulator:
         self.model = Model(scene)
         integ = scene.integration
         self.method, self.rtol, self.atol_scale = integ.solver, integ.rtol, integ.atol_scale
+        self.fast = None
+        if self.method == 'fast':
+            from .fast import FALLBACK_SOLVER, segments_for
+            self.fast = segments_for(self.model)
+            if self.fast is None:
+                self.method = FALLBACK_SOLVER
         self.t_end, self._horizon_cause, self._horizon_kind = self._horizon(scene)
         self._refuse_stiff_explicit()
         self.post_peak = integ.post_peak_ms
@@ -269,72 +288,90 @@ class HybridSimulator:
             return unbudgeted(t, y)
         return rhs
 
-    def _events(self, mode: Mode, phase: str, after_peak: bool, start_stretch: float,
-                start_rate: float = 0.0):
-        m, dyn = self.model, self._dynamics
-        events = []
-
-        def event(name, direction, fn):
-            def g(t, y):
-                return fn(float(t), y.tolist())
-            g.terminal, g.direction, g.__name__ = True, direction, name
-            events.append(g)
-
+    def _event_specs(self, mode: Mode, phase: str, after_peak: bool, start_stretch: float,
+                     start_rate: float = 0.0) -> list:
+        """The events that can end a segment in this mode and phase, each (name, kind,
+        direction, constant): the event function is kind's value (fast.layout.EV_*) plus the
+        constant. One list for both engines (_scipy_events, fast.segment)."""
+        m = self.model
+        specs = []
         if mode.latched and mode.stuck_at is None:
-            event('unlatch', -1, lambda t, y: m.latch_margin(dyn(mode, t, y)))
+            specs.append(('unlatch', EV_LATCH_MARGIN, -1, 0.0))
         elif mode.latched:
             # stuck by friction: it slips when the torque needed to hold it exceeds the limit
-            event('slip', -1, lambda t, y: m.friction_limit(dyn(mode, t, y))
-                  - abs(dyn(mode, t, y).contact_torque_Nmm))
+            specs.append(('slip', EV_SLIP, -1, 0.0))
         else:
-            phi = m.contact_angle
-            event('recontact', -1, lambda t, y: y[1] - phi + EVENT_OVERLAP)
+            specs.append(('recontact', EV_RECONTACT, -1, EVENT_OVERLAP - m.contact_angle))
             if m.friction_lever > 0.0:
                 # the arm comes to rest relative to the body: it sticks or reverses. Past the
                 # integrator's resolution of w3 only: at a release the friction just balances,
                 # and w3's rounding noise about zero is no reversal (at rtol 1e-3 it chattered).
-                resolution = self.arm_stop_speed
-                event('arm_stops', -mode.slip, lambda t, y: y[3] + mode.slip * resolution)
+                specs.append(('arm_stops', EV_ARM_STOPS, -mode.slip,
+                              mode.slip * self.arm_stop_speed))
         if m.unilateral:
-            def stretch(t, y):
-                th3 = mode.held_angle(m.contact_angle) if mode.latched else y[1]
-                return m.mech.tendon_length(y[0], th3) - m.free_length(t)[0]
-
             if mode.saturated:
-                event('resume', -1, stretch)
+                specs.append(('resume', EV_STRETCH, -1, 0.0))
             elif m.rigid and mode.taut:
-                event('slack', -1, lambda t, y: dyn(mode, t, y).tension_N)
+                specs.append(('slack', EV_TENSION, -1, 0.0))
                 if m.saturation_N is not None and not mode.latched:
-                    limit = m.saturation_N
-                    event('saturate', 1, lambda t, y: dyn(mode, t, y).tension_N - limit)
+                    specs.append(('saturate', EV_TENSION, 1, -m.saturation_N))
             elif (m.rigid and not mode.latched and start_stretch > -0.5 * self.separation
                     and start_rate > -self.separation / GRAZING_TIME_MS):
                 # Grazing: the tendon is at zero stretch and stretch rate but would have to
                 # push. It is taut again as soon as the tension it would need turns positive;
                 # only once it has really separated does the stretch itself decide. (Should
                 # the stretch grow past the resolution instead, it is taut as well.)
-                taut = Mode(False, True)
-                separation = self.separation
-                event('separate', -1, lambda t, y: stretch(t, y) + separation)
-                event('retension', 1, lambda t, y: dyn(taut, t, y).tension_N)
-                event('retension', 1, lambda t, y: stretch(t, y) - separation)
+                specs += [('separate', EV_STRETCH, -1, self.separation),
+                          ('retension', EV_TAUT_TENSION, 1, 0.0),
+                          ('retension', EV_STRETCH, 1, -self.separation)]
             elif m.rigid:
-                threshold = max(start_stretch, 0.0) + EVENT_OVERLAP
-                event('retension', 1, lambda t, y: stretch(t, y) - threshold)
+                specs.append(('retension', EV_STRETCH, 1,
+                              -(max(start_stretch, 0.0) + EVENT_OVERLAP)))
             elif mode.taut:
-                event('slack', -1, stretch)
+                specs.append(('slack', EV_STRETCH, -1, 0.0))
             else:
-                event('retension', 1, stretch)
+                specs.append(('retension', EV_STRETCH, 1, 0.0))
         if not mode.latched and not after_peak:
             if phase == 'II':
-                event('overcenter', -1, lambda t, y: m.mech.tendon(y[0], y[1]).d3)
+                specs.append(('overcenter', EV_OVERCENTER, -1, 0.0))
             elif phase == 'III':
-                event('max_contraction', 1, lambda t, y: y[2])
+                specs.append(('max_contraction', EV_MAX_CONTRACTION, 1, 0.0))
             elif phase == 'IV':
-                def tip_rate(t, y):
-                    d = dyn(mode, t, y)
-                    return m.mech.tip_power_rate(d.th3, d.w1, d.w3, d.a1, d.a3)
-                event('peak', -1, tip_rate)
+                specs.append(('peak', EV_PEAK, -1, 0.0))
+        return specs
+
+    def _scipy_events(self, mode: Mode, specs: list) -> list:
+        """solve_ivp's event functions for the specs (terminal, directed, named)."""
+        m, dyn = self.model, self._dynamics
+
+        def stretch(t, y):
+            th3 = mode.held_angle(m.contact_angle) if mode.latched else y[1]
+            return m.mech.tendon_length(y[0], th3) - m.free_length(t)[0]
+
+        def tip_rate(t, y):
+            d = dyn(mode, t, y)
+            return m.mech.tip_power_rate(d.th3, d.w1, d.w3, d.a1, d.a3)
+
+        taut = Mode(False, True)
+        value = {
+            EV_LATCH_MARGIN: lambda t, y: m.latch_margin(dyn(mode, t, y)),
+            EV_SLIP: lambda t, y: (m.friction_limit(dyn(mode, t, y))
+                                   - abs(dyn(mode, t, y).contact_torque_Nmm)),
+            EV_RECONTACT: lambda t, y: y[1],
+            EV_ARM_STOPS: lambda t, y: y[3],
+            EV_STRETCH: stretch,
+            EV_TENSION: lambda t, y: dyn(mode, t, y).tension_N,
+            EV_TAUT_TENSION: lambda t, y: dyn(taut, t, y).tension_N,
+            EV_OVERCENTER: lambda t, y: m.mech.tendon(y[0], y[1]).d3,
+            EV_MAX_CONTRACTION: lambda t, y: y[2],
+            EV_PEAK: tip_rate,
+        }
+        events = []
+        for name, kind, direction, constant in specs:
+            def g(t, y, fn=value[kind], constant=constant):
+                return fn(float(t), y.tolist()) + constant
+            g.terminal, g.direction, g.__name__ = True, direction, name
+            events.append(g)
         return events
 
     # --- transitions ----------------------------------------------------------------------------
@@ -597,7 +634,24 @@ class HybridSimulator:
         l_free, l_free_dot, _ = m.free_length(t0)
         start_stretch = tg.length - l_free
         start_rate = tg.d1 * s[2] + tg.d3 * s[3] - l_free_dot
-        events = self._events(mode, phase, after_peak, start_stretch, start_rate)
+        specs = self._event_specs(mode, phase, after_peak, start_stretch, start_rate)
+        if self.fast is not None:
+            fired, t, states, interpolant = self._fast_segment(mode, phase, t0, y0, t1, atol,
+                                                               specs, s[0])
+        else:
+            fired, t, states, interpolant = self._scipy_segment(mode, phase, t0, y0, t1, atol,
+                                                                specs)
+        self.run_data.solver_steps += len(t) - 1
+        frozen = mode.copy()
+        dense = (_DenseSegment(self, frozen, interpolant, s[0]) if interpolant is not None
+                 else None)
+        self.run_data.segments.append(Segment(phase, mode.latched, mode.taut, t, states,
+                                              dense, mode.saturated, mode.stuck_at, mode.slip))
+        name = specs[fired][0] if fired is not None else None
+        return name, float(t[-1]), tuple(states[-1].tolist())
+
+    def _scipy_segment(self, mode: Mode, phase, t0, y0, t1, atol, specs):
+        events = self._scipy_events(mode, specs)
         try:
             sol = self._solve_ivp(self._rhs(mode, phase), (t0, t1), y0, method=self.method,
                                   rtol=self.rtol, atol=atol, events=events,
@@ -610,25 +664,41 @@ class HybridSimulator:
         if sol.status == -1:
             raise SimulationError(f'integration failed at t = {sol.t[-1]:.6f} ms in phase '
                                   f'{phase}: {sol.message}')
-        self.run_data.solver_steps += len(sol.t) - 1
         frozen = mode.copy()
         states = np.array([self._unpack(frozen, ti, yi)
                            for ti, yi in zip(sol.t.tolist(), sol.y.T.tolist())])
-        dense = None
-        if self.dense and sol.sol is not None:
-            dense = _DenseSegment(self, frozen, sol.sol)
-        self.run_data.segments.append(Segment(phase, mode.latched, mode.taut, sol.t, states,
-                                              dense, mode.saturated, mode.stuck_at, mode.slip))
-        name = None
+        fired = None
         if sol.status == 1:
-            fired = [ev.__name__ for ev, te in zip(events, sol.t_events) if len(te)]
-            name = fired[0]
-        return name, float(sol.t[-1]), tuple(states[-1])
+            fired = next(i for i, te in enumerate(sol.t_events) if len(te))
+        return fired, sol.t, states, sol.sol if self.dense else None
+
+    def _fast_segment(self, mode: Mode, phase, t0, y0, t1, atol, specs, start_theta1):
+        from .fast.segment import SegmentFailed
+        budget = math.inf if self.max_rhs_evals is None else float(self.max_rhs_evals)
+        try:
+            return self.fast.run(mode, t0, y0, t1, self.rtol, atol, specs, budget, self.dense,
+                                 start_theta1)
+        except SegmentFailed as failed:
+            if failed.over_budget:
+                raise self._over_budget(failed.t_ms, phase) from None
+            raise SimulationError(
+                f'integration failed at t = {failed.t_ms:.6f} ms in phase {phase}: the step '
+                f'size fell below the spacing of floating-point numbers there') from None
 
     def energy(self, t, s) -> float:
         """Mechanical energy: kinetic + potential (+ compliant tendon), mJ."""
         return (self.model.kinetic_energy(s[1], s[2], s[3])
                 + self.model.potential_energy(s[0], s[1], t))
+
+    def tensions_at(self, segment: Segment, times) -> np.ndarray:
+        """Tendon tension (N) at times within a segment simulated with dense output."""
+        times = np.asarray(times, dtype=float)
+        states = segment.dense.states(times)
+        if self.fast is not None:
+            from .fast.equations import OBS_TENSION
+            return self.fast.observe(segment, times, states)[:, OBS_TENSION]
+        return np.array([self.dynamics_at(segment, t, s).tension_N
+                         for t, s in zip(times, states)])
 
     def dynamics_at(self, segment: Segment, t, s) -> Dynamics:
         return self._state_dynamics(Mode(segment.latched, segment.taut, segment.saturated,
@@ -647,11 +717,19 @@ class HybridSimulator:
 
 
 class _DenseSegment:
-    def __init__(self, sim: HybridSimulator, mode: Mode, interpolant):
+    def __init__(self, sim: HybridSimulator, mode: Mode, interpolant, start_theta1: float):
         self.sim, self.mode, self.interpolant = sim, mode, interpolant
+        self.start_theta1 = start_theta1
 
     def __call__(self, t: float) -> tuple:
         return self.sim._unpack(self.mode, t, tuple(self.interpolant(t)))
+
+    def states(self, times_ms) -> np.ndarray:
+        """Full states (rows) at many times; one compiled call on the fast path."""
+        if self.sim.fast is not None:
+            return self.sim.fast.states_at(self.mode, self.interpolant, self.start_theta1,
+                                           times_ms)
+        return np.array([self(t) for t in times_ms], dtype=float).reshape(-1, 6)
 
     def angles(self, times_ms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(theta1, theta3) at many times: with the arm free the integrated state starts with
@@ -659,5 +737,5 @@ class _DenseSegment:
         if not self.mode.latched:
             th1, th3 = self.interpolant(times_ms)[:2]
             return th1, th3
-        states = [self(t) for t in times_ms]
-        return np.array([s[0] for s in states]), np.array([s[1] for s in states])
+        states = self.states(times_ms)
+        return states[:, 0], states[:, 1]

@@ -207,11 +207,12 @@ class Camera:
 
 @dataclass(frozen=True)
 class Integration:
-    # Default from the Pareto front of `mantis bench accuracy` (README): DOP853 at 1e-7 is
-    # within ~1e-7 of the converged peak tip speed on every rigid-tendon scene at ~10 ms.
-    # A stiff compliant tendon wants an implicit method (air_23mm_compliant: Radau).
-    solver: str = param('DOP853', '', 'integrator', choices=(
-        'RK45', 'RK23', 'DOP853', 'Radau', 'BDF', 'LSODA'))
+    # The compiled Radau (mantis_sim.fast) at 1e-7 is within ~2e-9 of the converged peak tip
+    # speed on the rigid-tendon scenes at ~5 ms a strike (docs/accuracy_air_23mm.md);
+    # scipy's solvers stay, Radau at rtol 1e-10 as the judge of the fast path.
+    solver: str = param('fast', '', 'integrator: fast (the compiled Radau IIA of '
+                        'mantis_sim.fast), or one of scipy\'s', choices=(
+        'fast', 'RK45', 'RK23', 'DOP853', 'Radau', 'BDF', 'LSODA'))
     rtol: float = param(1e-7, '1', 'relative tolerance', 1e-13, 1e-2)
     atol_scale: float = param(1e-3, '1', 'absolute tolerance = rtol x this x state scale',
                               1e-9, 1.0, lo_open=True)

@@ -93,6 +93,8 @@ def simulate(scene: Scene, dense: bool = False) -> SimulationResult:
 
 
 def _trajectory(sim: HybridSimulator, raw: RawRun) -> Trajectory:
+    if sim.fast is not None:
+        return _fast_trajectory(sim, raw)
     model, mech = sim.model, sim.model.mech
     rows = []
     for seg in raw.segments:
@@ -110,6 +112,20 @@ def _trajectory(sim: HybridSimulator, raw: RawRun) -> Trajectory:
     residual = (energy - raw.energy0_mJ) - (work - lost)
     return Trajectory(t, th1, th3, w1, w3, force, contact, np.asarray(cols[7]), tip, spring,
                       kinetic, work, lost, residual, length, free)
+
+
+def _fast_trajectory(sim: HybridSimulator, raw: RawRun) -> Trajectory:
+    """_trajectory's columns, each segment's rows derived in one compiled call."""
+    from .fast import equations as eq
+    t = np.concatenate([seg.t for seg in raw.segments])
+    s = np.concatenate([seg.states for seg in raw.segments])
+    obs = np.concatenate([sim.fast.observe(seg) for seg in raw.segments])
+    phase = np.concatenate([np.full(len(seg.t), seg.phase) for seg in raw.segments])
+    residual = (obs[:, eq.OBS_ENERGY] - raw.energy0_mJ) - (s[:, 4] - s[:, 5])
+    return Trajectory(t, s[:, 0], s[:, 1], s[:, 2], s[:, 3], obs[:, eq.OBS_TENSION],
+                      obs[:, eq.OBS_CONTACT], phase, obs[:, eq.OBS_TIP_SPEED],
+                      obs[:, eq.OBS_SPRING], obs[:, eq.OBS_KINETIC], s[:, 4], s[:, 5], residual,
+                      obs[:, eq.OBS_LENGTH], obs[:, eq.OBS_FREE_LENGTH])
 
 
 def _event_time(raw: RawRun, name: str) -> Optional[float]:
