@@ -105,3 +105,6 @@ if [ "${1:-}" = "--test" ]; then
 else
   install_main
 fi
+# The fast strike engine compiles once per checkout (about a minute on two cores) into its cache
+# beside the sources: here, rather than in the first simulation (or in each test worker at once).
+.venv/bin/python -m mantis_sim.fast >&2
