@@ -61,25 +61,48 @@ class SimulationResult:
         """The first segment whose span holds t_ms (None: outside the run)."""
         return next((seg for seg in self.raw.segments if seg.t[0] <= t_ms <= seg.t[-1]), None)
 
+    def _segment_index(self, times_ms: np.ndarray) -> np.ndarray:
+        """For each time, the first segment whose span holds it (-1: outside the run)."""
+        index = np.full(times_ms.size, -1)
+        for k in range(len(self.raw.segments) - 1, -1, -1):
+            seg = self.raw.segments[k]
+            index[(times_ms >= seg.t[0]) & (times_ms <= seg.t[-1])] = k
+        return index
+
+    def _need_dense(self, what: str) -> None:
+        if self.simulator is None or any(seg.dense is None for seg in self.raw.segments):
+            raise ValueError(f'{what} needs a run simulated with dense=True')
+
     def state_at(self, t_ms: float) -> Optional[tuple]:
         """Interpolated (th1, th3, w1, w3) at t_ms, when simulated with dense output."""
         seg = self._segment_at(t_ms)
         return seg.dense(t_ms)[:4] if seg is not None and seg.dense is not None else None
+
+    def states_at(self, times_ms) -> np.ndarray:
+        """Full states (rows: theta1, theta3 rad, omega1, omega3 rad/ms, drive work,
+        dissipated mJ) at any times (ms) of a run simulated with ``dense=True``, from the
+        integrator's continuous solution; NaN outside the run."""
+        self._need_dense('states_at')
+        times = np.atleast_1d(np.asarray(times_ms, dtype=float))
+        out = np.full((times.size, 6), np.nan)
+        index = self._segment_index(times)
+        for k in np.unique(index[index >= 0]):
+            at = index == k
+            out[at] = self.raw.segments[k].dense.states(times[at])
+        return out
 
     def tendon_force_at(self, times_ms) -> np.ndarray:
         """Tendon tension (N) at any times (ms) of a run simulated with ``dense=True``, from the
         integrator's continuous solution; NaN outside the run. The trajectory holds the steps
         only, up to 0.2 ms apart where the strike's force rises at 30 N/ms: a straight line
         between them misses that curve by 0.2 N."""
-        segments = self.raw.segments
-        if self.simulator is None or any(seg.dense is None for seg in segments):
-            raise ValueError('tendon_force_at needs a run simulated with dense=True')
+        self._need_dense('tendon_force_at')
         times = np.atleast_1d(np.asarray(times_ms, dtype=float))
         out = np.full(times.size, np.nan)
-        for k, t in enumerate(times):
-            seg = self._segment_at(t)
-            if seg is not None:
-                out[k] = self.simulator.dynamics_at(seg, t, seg.dense(t)).tension_N
+        index = self._segment_index(times)
+        for k in np.unique(index[index >= 0]):
+            at = index == k
+            out[at] = self.simulator.tensions_at(self.raw.segments[k], times[at])
         return out
 
 

@@ -392,8 +392,7 @@ class _Strike:
             t0, t1 = seg.t[0], seg.t[-1]
             grid = np.arange(t0, t1, TENSION_GRID_MS)
             knots = np.union1d(seg.t, grid)
-            forces = np.array([self.sim.dynamics_at(seg, t, seg.dense(t)).tension_N
-                               for t in knots])
+            forces = self.sim.tensions_at(seg, knots)
             self._tension_cache[key] = (knots, forces)
         return self._tension_cache[key]
 

@@ -100,10 +100,8 @@ def _sampled_series(result, medium: str) -> StrikeSeries:
     t_iv_ms = result.metrics['phase_start_s']['IV'] * 1e3
     grid = series_grid(medium)
     times_ms = t_iv_ms + grid * 1e3
-    states = [result.state_at(t) for t in times_ms]
-    theta1 = np.array([s[0] if s is not None else np.nan for s in states])
-    theta3 = np.array([s[1] if s is not None else np.nan for s in states])
-    return StrikeSeries(grid, theta1, theta3, result.tendon_force_at(times_ms))
+    states = result.states_at(times_ms)
+    return StrikeSeries(grid, states[:, 0], states[:, 1], result.tendon_force_at(times_ms))
 
 
 def real_on_grid(series: StrikeSeries, medium: str) -> StrikeSeries:

@@ -49,7 +49,15 @@ class Progress:
 
 
 def connect(scheduler: str | None, workers: int | None):
-    """(client, cluster or None, description) of the cluster to use."""
+    """(client, cluster or None, description) of the cluster to use, each worker with the fast
+    engine loaded (or compiled, the first time on its machine) before any work is timed."""
+    from mantis_sim.fast import warm_up
+    client, cluster, where = _connect(scheduler, workers)
+    client.run(warm_up)
+    return client, cluster, where
+
+
+def _connect(scheduler: str | None, workers: int | None):
     from dask.distributed import Client, LocalCluster
     if scheduler is not None:
         check_reachable(scheduler)

@@ -170,7 +170,8 @@ def test_a_trial_from_the_installed_executables(install, tmp_path):
 # ------------------------------------------------------------------ package.xml
 # What the code imports, and the package.xml key that provides it (rosdep keys for Python
 # libraries; PyPI-only ones are named in package.xml's comment and installed with pip).
-ROSDEP_KEYS = {'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'yaml': 'python3-yaml',
+ROSDEP_KEYS = {'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'numba': 'python3-numba',
+               'yaml': 'python3-yaml',
                'matplotlib': 'python3-matplotlib', 'serial': 'python3-serial',
                'openpyxl': 'python3-openpyxl'}
 PYPI_ONLY = {'mcap', 'mcap_ros2', 'rosbags', 'thorlabs_apt_protocol', 'nidaqmx', 'dask',
