@@ -12,6 +12,7 @@ with the reason. Nothing here knows where the designs run (mantis_sim.studies.sw
 from __future__ import annotations
 
 from dataclasses import dataclass
+import functools
 import hashlib
 import itertools
 import json
@@ -20,6 +21,7 @@ import time
 
 import numpy as np
 
+from .blas import one_blas_thread
 from .errors import InputError
 from .model import SimulationError
 from .parameters import ParameterError
@@ -150,16 +152,17 @@ def run_design(scene: Scene, values: dict) -> dict:
 
 
 def run_chunk(scene_name: str, overrides: list, chunk: list[dict]) -> list[dict]:
-    """Rows of several designs of one scene: what a worker runs (the scene loaded once).
+    """Rows of several designs of one scene: what a worker runs (the scene loaded once, BLAS
+    on one thread as on any worker: mantis_sim.blas)."""
+    one_blas_thread()
+    scene = _loaded(scene_name, tuple(overrides))
+    return [run_design(scene, values) for values in chunk]
 
-    BLAS runs on one thread here: the implicit solvers' LU factorisations give other last
-    digits with two OpenBLAS threads than with one (Radau at rtol 1e-7: 28.25404482109 against
-    ...112 m/s), and a Dask worker runs with one; this way a design's row is the same in this
-    process, on a LocalCluster and on any cluster."""
-    from threadpoolctl import threadpool_limits
-    scene = load_scene(scene_name, overrides)
-    with threadpool_limits(limits=1, user_api='blas'):
-        return [run_design(scene, values) for values in chunk]
+
+@functools.lru_cache(maxsize=8)
+def _loaded(scene_name: str, overrides: tuple) -> Scene:
+    """The scene a worker's chunks share: loaded (its YAML read and checked) once."""
+    return load_scene(scene_name, list(overrides))
 
 
 def _flatten(metrics: dict) -> dict:

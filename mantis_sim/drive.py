@@ -78,7 +78,7 @@ class RampedPull:
         while self.pulled(hi)[0] < distance_mm:
             hi *= 2.0
         lo = 0.0
-        for _ in range(100):
+        while hi - lo > 1e-12 * hi:         # to a picosecond in a second (~40 halvings)
             mid = 0.5 * (lo + hi)
             if self.pulled(mid)[0] < distance_mm:
                 lo = mid

@@ -630,10 +630,13 @@ class HybridSimulator:
             (1.0, 1.0, 100.0, 100.0) if mode.latched else STATE_SCALE)
         atol = [self.rtol * self.atol_scale * x for x in scale]
         m = self.model
-        tg = m.mech.tendon(s[0], s[1])
-        l_free, l_free_dot, _ = m.free_length(t0)
-        start_stretch = tg.length - l_free
-        start_rate = tg.d1 * s[2] + tg.d3 * s[3] - l_free_dot
+        start_stretch = start_rate = 0.0
+        if m.rigid and m.unilateral and not mode.taut and not mode.saturated:
+            # a slack rigid tendon: where it starts decides which re-tension events apply
+            tg = m.mech.tendon(s[0], s[1])
+            l_free, l_free_dot, _ = m.free_length(t0)
+            start_stretch = tg.length - l_free
+            start_rate = tg.d1 * s[2] + tg.d3 * s[3] - l_free_dot
         specs = self._event_specs(mode, phase, after_peak, start_stretch, start_rate)
         if self.fast is not None:
             fired, t, states, interpolant = self._fast_segment(mode, phase, t0, y0, t1, atol,
@@ -710,6 +713,8 @@ class HybridSimulator:
         not from wherever the last constrained segment left it (a re-latch after the strike
         found the far root, a contact torque of the wrong sign, and unlatched and re-latched
         every 0.2 us for ever)."""
+        if self.fast is not None:
+            return Dynamics(*self.fast.state_dynamics(mode, t, s))
         if self._constrained(mode):
             self.model.theta1_guess = s[0]
             self._constrained_memo.clear()

@@ -223,6 +223,10 @@ class Integration:
                                 0.0, 1e4)
     baumgarte_per_ms: float = param(0.05, '1/ms', 'rigid-constraint drift correction rate',
                                     0.0, 100.0)
+    # mantis_sim.stiff_tendon: the ringing of a very stiff tendon need not be resolved
+    rigid_tendon_below: float = param(1e-4, '1', 'the fast path solves a compliant tendon as '
+                                      'rigid when its estimated effect on the strike is below '
+                                      'this (0: never)', 0.0, 0.1)
 
 
 SECTIONS: dict[str, type] = {

@@ -7,6 +7,7 @@ from typing import Optional
 
 import numpy as np
 
+from . import stiff_tendon
 from .hybrid import PHASES, HybridSimulator, RawRun
 from .scene import Scene
 
@@ -107,6 +108,24 @@ class SimulationResult:
 
 
 def simulate(scene: Scene, dense: bool = False) -> SimulationResult:
+    """Simulate the scene (a compliant tendon too stiff to matter in its rigid limit on the
+    fast path: mantis_sim.stiff_tendon; metrics['rigid_tendon_limit'] then says so)."""
+    limit = stiff_tendon.rigid_limit(scene)
+    if limit is not None:
+        result = _simulate(limit, dense)
+        m = result.metrics
+        effect = stiff_tendon.compliance_effect(scene, m['peak_tendon_force_N'],
+                                                m['max_spring_energy_mJ'])
+        if effect < scene.integration.rigid_tendon_below:
+            result.scene = scene
+            m['rigid_tendon_limit'] = (f'the tendon ({scene.tendon.stiffness_N_per_mm:g} N/mm) '
+                                       f'was solved as rigid: its estimated effect on the '
+                                       f'strike is {effect:.1e}')
+            return result
+    return _simulate(scene, dense)
+
+
+def _simulate(scene: Scene, dense: bool) -> SimulationResult:
     sim = HybridSimulator(scene, dense=dense)
     raw = sim.run()
     rhs_evals = sim.model.rhs_evals      # the run's; building the trajectory evaluates more
@@ -204,6 +223,7 @@ def _metrics(sim: HybridSimulator, raw: RawRun, tr: Trajectory, rhs_evals: int) 
         'effects': list(model.effects),
         'solver': sim.method,
         'rtol': sim.rtol,
+        'rigid_tendon_limit': None,
     }
 
 

@@ -24,9 +24,9 @@ def add_commands(commands) -> None:
                        help='N designs from a Latin hypercube over the ranges (else a grid)')
     sweep.add_argument('--seed', type=int, default=0, help='seed of the Latin hypercube')
     sweep.add_argument('--accuracy', type=float, metavar='REL',
-                       help='the cheapest solver and tolerance whose peak tip speed is within '
-                       'REL (relative) of the converged one on the scene (from the accuracy '
-                       'benchmark\'s work-precision data)')
+                       help='the loosest tolerance of the fast path whose peak tip speed and '
+                       'spring energy are within REL (relative) of the converged ones on a '
+                       'sample of the designs, with a margin of 3')
     sweep.add_argument('--solver', help='integrator (instead of --accuracy)')
     sweep.add_argument('--rtol', type=float, help='relative tolerance (instead of --accuracy)')
     sweep.add_argument('--out', type=Path, required=True, help='results table (.parquet)')
@@ -73,8 +73,10 @@ def run_sweep_command(args) -> int:
     base = load_scene(args.scene, overrides)          # unknown scene or bad --set: refused
     check_ranges(base, ranges)
     estimate_s = 0.01
+    designs = (latin_hypercube(ranges, args.sample, args.seed) if args.sample is not None
+               else grid(ranges))
     if args.accuracy is not None:
-        setting = choose_setting(args.scene, overrides, args.accuracy)
+        setting = choose_setting(args.scene, overrides, args.accuracy, designs)
         print(f'mantis sweep: --accuracy {args.accuracy:g}: {setting}', file=sys.stderr)
         overrides += setting.overrides()
         estimate_s = setting.wall_ms * 1e-3
@@ -84,8 +86,6 @@ def run_sweep_command(args) -> int:
         if args.rtol is not None:
             overrides.append(f'integration.rtol={args.rtol!r}')
         load_scene(args.scene, overrides)             # a bad solver or tolerance: refused
-    designs = (latin_hypercube(ranges, args.sample, args.seed) if args.sample is not None
-               else grid(ranges))
     summary = run_sweep(args.scene, overrides, designs, args.out, scheduler=args.scheduler,
                         workers=args.workers, chunk_size=args.chunk_size,
                         estimated_strike_s=estimate_s, progress=not args.quiet)

@@ -531,6 +531,15 @@ def _mode_y(s, latched, taut, saturated, p, ws, y):
 
 
 @njit(cache=True)
+def state_dynamics(t, s, mode, p, knots, ws, out):
+    """hybrid.HybridSimulator._state_dynamics: the dynamics at a full state s."""
+    y = np.empty(6)
+    latched, taut, saturated = mode[0] != 0.0, mode[1] != 0.0, mode[2] != 0.0
+    _mode_y(s, latched, taut, saturated, p, ws, y)
+    dynamics(t, y, latched, taut, saturated, mode[3], mode[4], p, knots, ws, out)
+
+
+@njit(cache=True)
 def full_states(ts, ys, mode, p, knots, ws):
     """hybrid._unpack of every row of a segment: (rows, 6) full states."""
     rows, n = ys.shape

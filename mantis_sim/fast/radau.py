@@ -214,12 +214,21 @@ def _event_root(k, t_old, h, y_old, q, g_lo, g_hi, n, mode, p, knots, ws, d, scr
 
 
 @njit(cache=True)
+def _left3(a, b, out):
+    """out = a b for a 3x3 and b 3xn (numba's @ calls BLAS, dear on these sizes)."""
+    for i in range(3):
+        for j in range(b.shape[1]):
+            out[i, j] = a[i, 0] * b[0, j] + a[i, 1] * b[1, j] + a[i, 2] * b[2, j]
+
+
+@njit(cache=True)
 def _collocation(t, y, h, z0, scale, tol, lu_r, piv_r, lu_c, piv_c, n, mode, p, knots, ws,
                  d):
     """scipy's solve_collocation_system: (converged, iterations, Z, rate (-1: none))."""
     m_real = MU_REAL / h
     m_complex = MU_COMPLEX / h
-    w = TI @ z0
+    w = np.empty((3, n))
+    _left3(TI, z0, w)
     z = z0.copy()
     f = np.empty((3, n))
     fi = np.empty(n)
@@ -258,7 +267,7 @@ def _collocation(t, y, h, z0, scale, tol, lu_r, piv_r, lu_c, piv_c, n, mode, p, 
                             or rate ** (NEWTON_MAXITER - k) / (1 - rate) * dw_norm > tol):
             break
         w += dw
-        z = T @ w
+        _left3(T, w, z)
         if dw_norm == 0.0 or (rate >= 0.0 and rate / (1 - rate) * dw_norm < tol):
             converged = True
             break
@@ -403,7 +412,7 @@ def integrate(y0, t0, t_bound, rtol, atol, mode, p, knots, kinds, directions, co
                 have_lu = False
                 continue
             y_new = y + z[2]
-            ze = (z.T @ E) / h
+            ze = (z[0] * E[0] + z[1] * E[1] + z[2] * E[2]) / h
             error = _lu_solve(lu_r, piv_r, f + ze)
             scale = atol + np.maximum(np.abs(y), np.abs(y_new)) * rtol
             error_norm = _rms(error, scale)
@@ -441,7 +450,9 @@ def integrate(y0, t0, t_bound, rtol, atol, mode, p, knots, kinds, directions, co
         y_old[:] = y
         t_old = t
         h_sol = h
-        q = z.T @ P
+        for j in range(n):
+            for c in range(3):
+                q[j, c] = z[0, j] * P[0, c] + z[1, j] * P[1, c] + z[2, j] * P[2, c]
         have_sol = True
         t = t_new
         y = y_new.copy()

@@ -71,6 +71,16 @@ class FastSegments:
         interpolant = DenseSteps(ts, ys, hs, qs) if dense else None
         return (int(event) if status == EVENT else None), ts, states, interpolant
 
+    def state_dynamics(self, mode, t: float, s) -> tuple:
+        """hybrid._state_dynamics at the full state s: the model.Dynamics fields, in order."""
+        p, knots = self.params()
+        out = np.empty(eq.DYN_SIZE)
+        self._ws[eq.WS_RHS_EVALS] = self.model.rhs_evals
+        eq.state_dynamics(float(t), np.asarray(s, dtype=float), mode_vector(mode), p, knots,
+                          self._ws, out)
+        self.model.rhs_evals = int(self._ws[eq.WS_RHS_EVALS])
+        return out.tolist()
+
     def observe(self, segment, times=None, states=None) -> np.ndarray:
         """Derived values (equations.OBS_*) of a segment's rows, or of given times and full
         states within it (rows)."""

@@ -12,6 +12,7 @@ import socket
 import sys
 import time
 
+from mantis_sim.blas import one_blas_thread
 from mantis_sim.errors import InputError
 
 CONNECT_TIMEOUT_S = 10.0
@@ -94,11 +95,22 @@ def check_reachable(scheduler: str) -> None:
 
 
 def _one_blas_thread(function: Callable, item):
-    """BLAS on one thread, as on a Dask worker: the implicit solvers' LU factorisations give
-    other last digits with two OpenBLAS threads, and a result must not depend on where it ran."""
-    from threadpoolctl import threadpool_limits
-    with threadpool_limits(limits=1, user_api='blas'):
-        return function(item)
+    """function(item) with BLAS on one thread, as on any worker (mantis_sim.blas)."""
+    one_blas_thread()
+    return function(item)
+
+
+def _batch(function: Callable, items: list) -> list:
+    """[function(item) for item in items]: one task of a map, on a worker."""
+    one_blas_thread()
+    return [function(item) for item in items]
+
+
+# A map goes out in batches, at least this many per worker (so that the load balances and the
+# workers end together) and at most MAX_BATCH items each: a strike of the fast path costs a few
+# ms, a task of Dask about one, and one item per task spent more time scheduling than computing.
+BATCHES_PER_WORKER = 4
+MAX_BATCH = 64
 
 
 class ClusterMap:
@@ -141,13 +153,17 @@ class ClusterMap:
                         bar.advance(1)
                 return results
             from dask.distributed import as_completed
-            futures = self.client.map(_one_blas_thread, [function] * len(items), items,
-                                      pure=False)
-            position = {future.key: i for i, future in enumerate(futures)}
+            size = max(1, min(MAX_BATCH, -(-len(items) // (BATCHES_PER_WORKER
+                                                            * self.worker_count))))
+            starts = range(0, len(items), size)
+            futures = [self.client.submit(_batch, function, items[i:i + size], pure=False)
+                       for i in starts]
+            first = {future.key: i for i, future in zip(starts, futures)}
             for future in as_completed(futures):
-                results[position[future.key]] = future.result()
+                batch = future.result()
+                results[first[future.key]:first[future.key] + len(batch)] = batch
                 if bar:
-                    bar.advance(1)
+                    bar.advance(len(batch))
             return results
         finally:
             if bar:

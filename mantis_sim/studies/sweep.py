@@ -24,7 +24,8 @@ from mantis_sim.results import force_warnings
 from .parallel import Progress, connect
 
 CHECKPOINT_S = 10.0
-CHUNK_TARGET_S = 0.5            # wall time of one chunk: scheduling costs ~ms per task
+CHUNK_TARGET_S = 0.2            # wall time of one chunk: scheduling costs ~ms per task
+CHUNKS_PER_WORKER = 10          # at least: the last chunk is the sweep's tail
 # A design whose peak tendon force is beyond the load cell's range (mantis_sim.results
 # .force_warnings) says so here; '' otherwise.
 WARNING_COLUMN = 'warning'
@@ -90,10 +91,11 @@ def write_table(rows: list[dict], path: Path) -> None:
 
 
 def chunk_size_for(estimated_strike_s: float, designs: int, workers: int) -> int:
-    """Enough designs per chunk for ~CHUNK_TARGET_S of work, yet at least 4 chunks a worker
-    (so that the load balances and a lost worker loses little)."""
+    """Enough designs per chunk for ~CHUNK_TARGET_S of work, yet at least CHUNKS_PER_WORKER
+    chunks a worker (so that the load balances, the workers finish together and a lost worker
+    loses little)."""
     by_time = max(1, int(CHUNK_TARGET_S / max(estimated_strike_s, 1e-4)))
-    by_balance = max(1, designs // (4 * max(workers, 1)))
+    by_balance = max(1, designs // (CHUNKS_PER_WORKER * max(workers, 1)))
     return max(1, min(by_time, by_balance))
 
 

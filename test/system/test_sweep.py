@@ -182,7 +182,8 @@ def test_accuracy_picks_the_cheapest_setting_that_reaches_it(tmp_path, capsys):
     rows = read_table(out)
     assert f'{rows[0]["solver"]} at rtol {rows[0]["rtol"]:g}' in chosen
     error = float(chosen.split('within ')[1].split(' of')[0])
-    assert error <= 1e-3
+    assert error * 3 <= 1e-3
+    assert rows[0]['solver'] == 'fast' and 'sampled designs' in chosen
 
 
 def test_sweep_plot_writes_the_figures_and_the_best_designs(serial_table, tmp_path):

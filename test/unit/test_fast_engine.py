@@ -148,3 +148,27 @@ def test_a_scene_it_cannot_take_falls_back_with_one_line(monkeypatch, capsys):
     assert err.count('\n') == 1
     assert err == ("mantis_sim: the fast engine cannot take this scene: the compiled engine has "
                    "no force term Warp; integrating with scipy's Radau instead\n")
+
+
+@pytest.mark.parametrize('overrides, limit', [
+    (['tendon.stiffness_N_per_mm=1e6'], True),
+    ([], False),                                             # 50 N/mm: it matters
+    (['tendon.stiffness_N_per_mm=1e6', 'integration.rigid_tendon_below=0'], False),
+    (['tendon.stiffness_N_per_mm=1e6', 'integration.solver=Radau'], False),
+])
+def test_a_tendon_too_stiff_to_show_is_solved_in_its_rigid_limit(overrides, limit):
+    """mantis_sim.stiff_tendon: on the fast path a 1e6 N/mm tendon is solved as rigid, and the
+    metrics say so with the estimated effect, which is below the scene's threshold; 50 N/mm,
+    a threshold of 0 or a scipy solver integrate the compliant tendon."""
+    result = simulate(load_scene('air_23mm_compliant', overrides))
+    note = result.metrics['rigid_tendon_limit']
+    assert result.scene.tendon.model == 'compliant'
+    assert result.metrics['status'] == 'strike'
+    assert (note is not None) == limit
+    if limit:
+        effect = float(note.rsplit(' ', 1)[1])
+        assert effect < result.scene.integration.rigid_tendon_below
+        resolved = simulate(load_scene('air_23mm_compliant', [
+            *overrides, 'integration.rigid_tendon_below=0'])).metrics
+        assert result.metrics['peak_tip_speed_mps'] == pytest.approx(
+            resolved['peak_tip_speed_mps'], rel=1e-4)
