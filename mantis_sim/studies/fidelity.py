@@ -31,11 +31,16 @@ SERIES_STEP_S = {'air': 0.2e-3, 'water': 0.5e-3}
 LATCH_KEY = 'geometry.latch_offset_deg'
 
 
+def strike_values(strike: RealStrike) -> dict:
+    """The scene keys through which a strike's conditions are set, with their values."""
+    return {'geometry.d_t_mm': strike.d_t_mm,
+            'geometry.contact_angle_deg': strike.contact_angle_deg,
+            'drive.pull_speed_mm_per_s': strike.pull_mm_per_s}
+
+
 def strike_overrides(strike: RealStrike) -> list[str]:
-    """The scene keys through which a strike's conditions are set."""
-    return [f'geometry.d_t_mm={strike.d_t_mm!r}',
-            f'geometry.contact_angle_deg={strike.contact_angle_deg!r}',
-            f'drive.pull_speed_mm_per_s={strike.pull_mm_per_s!r}']
+    """strike_values as `--set` assignments."""
+    return [f'{key}={value!r}' for key, value in strike_values(strike).items()]
 
 
 def seat_values(strike: RealStrike) -> dict:
@@ -71,11 +76,11 @@ def simulate_strike(scene: Scene, strike: RealStrike, series: bool = True,
     """One strike at its own conditions (module docstring), with ``values`` ({key: value}, as a
     fit or a day's state sets them) set together with them. Never raises for a strike the model
     cannot simulate: its status says why."""
-    overrides = strike_overrides(strike) + [f'{k}={v!r}' for k, v in (values or {}).items()]
+    settings = {**strike_values(strike), **(values or {})}
     if series:      # simulate through the whole window that is compared
-        overrides.append(f'integration.post_peak_ms={SERIES_WINDOW_S[strike.medium][1] * 1e3!r}')
+        settings['integration.post_peak_ms'] = SERIES_WINDOW_S[strike.medium][1] * 1e3
     try:
-        at_conditions = scene.with_overrides(overrides)
+        at_conditions = scene.with_values(settings)
     except ParameterError as exc:   # e.g. a latch offset this strike's angle cannot take
         return SimulatedStrike(strike.trial, 'failed', f'at its conditions: {exc}')
     try:
@@ -225,4 +230,5 @@ def effect_slopes(rows: list[dict]) -> list[dict]:
 
 __all__ = ['COMPARED', 'EFFECT_SLOPES', 'LATCH_KEY', 'SimulatedStrike', 'Slope',
            'effect_slopes', 'error_rows', 'fit_slope', 'fit_slopes', 'group_summary',
-           'real_on_grid', 'seat_values', 'series_grid', 'simulate_strike', 'strike_overrides']
+           'real_on_grid', 'seat_values', 'series_grid', 'simulate_strike', 'strike_overrides',
+           'strike_values']
