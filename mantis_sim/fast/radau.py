@@ -39,7 +39,7 @@ NEWTON_MAXITER = 6
 MIN_FACTOR, MAX_FACTOR = 0.2, 10.0
 EPS = float(np.finfo(float).eps)
 JAC_DIFF_REJECT, JAC_DIFF_SMALL, JAC_DIFF_BIG = EPS ** 0.875, EPS ** 0.75, EPS ** 0.25
-JAC_MIN_FACTOR = 1e3 * EPS
+JAC_MIN_FACTOR, JAC_MAX_FACTOR = 1e3 * EPS, 1.0
 
 # integrate()'s status
 FINISHED, EVENT, STEP_TOO_SMALL, OVER_BUDGET = 0, 1, -1, -2
@@ -59,6 +59,12 @@ def _events(t, y, n, mode, p, knots, ws, d, scratch, kinds, consts, g):
     """Every event function at (t, y) into g."""
     eq.dynamics(t, y, mode[0] != 0.0, mode[1] != 0.0, mode[2] != 0.0, mode[3], mode[4], p,
                 knots, ws, d)
+    _event_values(t, y, mode, p, knots, d, scratch, kinds, consts, g)
+
+
+@njit(cache=True)
+def _event_values(t, y, mode, p, knots, d, scratch, kinds, consts, g):
+    """Every event function at (t, y) into g, d the dynamics there."""
     for k in range(kinds.size):
         g[k] = eq.event_value(kinds[k], consts[k], t, y, d, mode[0] != 0.0, mode[3], p, knots,
                               scratch)
@@ -154,7 +160,9 @@ def _num_jac(t, y, f, threshold, factor, n, mode, p, knots, ws, d, jac):
             factor[j] *= 10.0
         elif max_diff > JAC_DIFF_BIG * scale:
             factor[j] *= 0.1
-        factor[j] = max(factor[j], JAC_MIN_FACTOR)
+        # Unlike scipy's, capped: a column nothing depends on (the energy accumulators) grew
+        # its factor tenfold at every Jacobian until it overflowed.
+        factor[j] = min(max(factor[j], JAC_MIN_FACTOR), JAC_MAX_FACTOR)
 
 
 @njit(cache=True)
@@ -439,6 +447,8 @@ def integrate(y0, t0, t_bound, rtol, atol, mode, p, knots, kinds, directions, co
         else:
             have_lu = False
         _rhs(t_new, y_new, n, mode, p, knots, ws, d, f_new)
+        # the events at the step's end, from the same evaluation of the dynamics
+        _event_values(t_new, y_new, mode, p, knots, d, scratch, kinds, consts, g_new)
         if recompute_jac:
             _num_jac(t_new, y_new, f_new, atol, jac_factor, n, mode, p, knots, ws, d, jac)
             current_jac = True
@@ -459,7 +469,6 @@ def integrate(y0, t0, t_bound, rtol, atol, mode, p, knots, kinds, directions, co
         f[:] = f_new
 
         # events: a sign change in the wanted direction, located on the dense output
-        _events(t, y, n, mode, p, knots, ws, d, scratch, kinds, consts, g_new)
         t_event = math.inf
         for k in range(n_ev):
             up = g[k] <= 0.0 and g_new[k] >= 0.0
