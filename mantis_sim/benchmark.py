@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 import statistics
 
+from .fast import warm_up
 from .results import simulate
 from .scene import load_scene
 
@@ -58,6 +59,7 @@ def accuracy_table(scene_name: str, repeats: int = 5, overrides=(),
     time)."""
     def run(solver, rtol):
         return _run_scene(scene_name, solver, rtol, overrides)
+    warm_up()           # the fast path's first strike in a process loads the engine
     ref_a = run('DOP853', 1e-12)
     ref_b = run('Radau', 1e-11)
     v_ref, t_ref = ref_a['peak_tip_speed_mps'], ref_a['phase_start_s']['IV']

@@ -77,13 +77,22 @@ class RampedPull:
         hi = max(self.t_ramp, 1.0) + self.tau + distance_mm / self.v
         while self.pulled(hi)[0] < distance_mm:
             hi *= 2.0
-        lo = 0.0
-        while hi - lo > 1e-12 * hi:         # to a picosecond in a second (~40 halvings)
-            mid = 0.5 * (lo + hi)
-            if self.pulled(mid)[0] < distance_mm:
-                lo = mid
+        # Newton on the monotonic pulled(t), kept inside a shrinking bracket (a step that would
+        # leave it bisects instead), to a picosecond in a second
+        lo, t = 0.0, hi
+        for _ in range(200):
+            x, v, _ = self.pulled(t)
+            if x < distance_mm:
+                lo = t
             else:
-                hi = mid
+                hi = t
+            step = (x - distance_mm) / v if v > 0.0 else math.inf
+            after = t - step
+            if not lo < after < hi:
+                after = 0.5 * (lo + hi)
+            if abs(after - t) <= 1e-12 * hi:
+                return after
+            t = after
         return hi
 
 

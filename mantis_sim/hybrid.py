@@ -153,8 +153,10 @@ class HybridSimulator:
         # 0.65 CPU s, which the processes of a trial that only name the simulation (the command
         # line and supervisor of the multi-process layout) need not pay; a simulating process
         # pays it when it builds its world, before the trial, not at its first integration.
-        from scipy.integrate import solve_ivp
-        self._solve_ivp = solve_ivp
+        # The fast path does not need it at all.
+        if self.fast is None:
+            from scipy.integrate import solve_ivp
+            self._solve_ivp = solve_ivp
 
     def _horizon(self, scene: Scene) -> tuple[float, str, str]:
         """(end time in ms, what ends a run there, and its kind: 'cap', 'still' or 'travel'):
@@ -201,8 +203,10 @@ class HybridSimulator:
         """An explicit solver on a stiff compliant tendon: refused before it starts, with the
         stability-limited step count it would need at the least (EXPLICIT_STIFF_STEP_BUDGET)."""
         limit = EXPLICIT_STABILITY.get(self.method)
+        if limit is None:
+            return
         rate = self.tendon_rate_per_ms()
-        if limit is None or rate == 0.0:
+        if rate == 0.0:
             return
         steps = rate * self.t_end / limit
         if steps > EXPLICIT_STIFF_STEP_BUDGET:

@@ -35,6 +35,7 @@ class FastSegments:
         self._p = params
         self._drive = model.drive
         self._ws = np.zeros(eq.WS_SIZE)
+        self._spec_cache: dict = {}
 
     def params(self) -> tuple[np.ndarray, np.ndarray]:
         """The scene's vector, with the model's start length (set at its start) and its drive
@@ -54,9 +55,7 @@ class FastSegments:
         ws[eq.WS_THETA1_GUESS] = model.theta1_guess
         ws[eq.WS_RHS_EVALS] = model.rhs_evals
         vector = mode_vector(mode)
-        kinds = np.array([spec[1] for spec in specs], dtype=np.int64)
-        directions = np.array([spec[2] for spec in specs], dtype=float)
-        constants = np.array([spec[3] for spec in specs], dtype=float)
+        kinds, directions, constants = self._spec_arrays(specs)
         try:
             status, event, ts, ys, hs, qs = integrate(
                 y0, t0, t1, rtol, np.asarray(atol, dtype=float), vector, p, knots, kinds,
@@ -80,6 +79,18 @@ class FastSegments:
                           self._ws, out)
         self.model.rhs_evals = int(self._ws[eq.WS_RHS_EVALS])
         return out.tolist()
+
+    def _spec_arrays(self, specs: list) -> tuple:
+        """The specs' kinds, directions and constants as the kernel's arrays (a strike asks for
+        the same few lists again and again)."""
+        key = tuple(specs)
+        arrays = self._spec_cache.get(key)
+        if arrays is None:
+            arrays = self._spec_cache[key] = (
+                np.array([spec[1] for spec in specs], dtype=np.int64),
+                np.array([spec[2] for spec in specs], dtype=float),
+                np.array([spec[3] for spec in specs], dtype=float))
+        return arrays
 
     def observe(self, segment, times=None, states=None) -> np.ndarray:
         """Derived values (equations.OBS_*) of a segment's rows, or of given times and full

@@ -115,12 +115,14 @@ def run_sweep(scene_name: str, overrides: list, designs: list[dict], out: Path, 
     started = time.monotonic()             # of the computing (after a cluster is up)
     bar = Progress(len(designs), len(rows)) if progress else None
     strikes_s = 0.0
+    last_row = started
 
     def finished(chunk_rows, positions):
-        nonlocal strikes_s
+        nonlocal strikes_s, last_row
         for pos, row in zip(positions, chunk_rows):
             rows[pos] = _with_warning(row, capacity_n)
             strikes_s += float(row.get('design_time_s') or 0.0)
+        last_row = time.monotonic()
         if bar:
             bar.advance(len(chunk_rows))
 
@@ -142,7 +144,7 @@ def run_sweep(scene_name: str, overrides: list, designs: list[dict], out: Path, 
                 checkpoint()
         else:
             client, cluster, where = connect(scheduler, workers)
-            started = time.monotonic()
+            started = last_row = time.monotonic()
             try:
                 n_workers = max(1, len(client.scheduler_info().get('workers', {})))
                 size = chunk_size or chunk_size_for(estimated_strike_s, len(todo), n_workers)
@@ -160,7 +162,7 @@ def run_sweep(scene_name: str, overrides: list, designs: list[dict], out: Path, 
     ordered = [rows[i] for i in sorted(rows)]
     return SweepSummary(designs=len(designs), computed=len(todo), reused=len(designs) - len(todo),
                         ok=sum(r.get('status') == STATUS_OK for r in ordered),
-                        wall_s=time.monotonic() - started, strikes_s=strikes_s,
+                        wall_s=last_row - started, strikes_s=strikes_s,
                         workers=n_workers, where=where)
 
 
