@@ -52,6 +52,26 @@ class MassMatrix(NamedTuple):
         return 0.5 * (self.m11 * w1 * w1 + 2.0 * self.m12 * w1 * w3 + self.m22 * w3 * w3)
 
 
+def tendon_terms(L1: float, L2: float, d: float, beta: float, th1: float, th3: float) -> tuple:
+    """TendonGeometry's fields for links L1, L2, guide distance d and attachment angle beta: one
+    formula for the Python model and the compiled one (mantis_sim.fast.equations)."""
+    u = th1 - th3 - beta
+    w = th3 + beta
+    cos_u, sin_u, cos_w, sin_w = math.cos(u), math.sin(u), math.cos(w), math.sin(w)
+    cos1, sin1 = math.cos(th1), math.sin(th1)
+    sq = L1 * L1 + L2 * L2 + d * d - 2 * L1 * L2 * cos_w - 2 * d * (L1 * cos1 - L2 * cos_u)
+    s1 = 2 * d * (L1 * sin1 - L2 * sin_u)
+    s3 = 2 * L2 * (L1 * sin_w + d * sin_u)
+    s11 = 2 * d * (L1 * cos1 - L2 * cos_u)
+    s13 = 2 * d * L2 * cos_u
+    s33 = 2 * L2 * (L1 * cos_w - d * cos_u)
+    length = math.sqrt(sq)
+    inv2l = 0.5 / length
+    inv4l3 = inv2l / (2.0 * sq)
+    return (length, s1 * inv2l, s3 * inv2l, s11 * inv2l - s1 * s1 * inv4l3,
+            s13 * inv2l - s1 * s3 * inv4l3, s33 * inv2l - s3 * s3 * inv4l3)
+
+
 class Mechanism:
     """Geometry and inertia of one scene; added mass is included only if the scene asks."""
 
@@ -76,25 +96,7 @@ class Mechanism:
 
     # --- tendon -------------------------------------------------------------------------------
     def tendon(self, th1: float, th3: float) -> TendonGeometry:
-        L1, L2, d = self.L1, self.L2, self.d_t
-        u = th1 - th3 - self.beta
-        w = th3 + self.beta
-        cos_u, sin_u, cos_w, sin_w = math.cos(u), math.sin(u), math.cos(w), math.sin(w)
-        cos1, sin1 = math.cos(th1), math.sin(th1)
-        sq = (L1 * L1 + L2 * L2 + d * d - 2 * L1 * L2 * cos_w
-              - 2 * d * (L1 * cos1 - L2 * cos_u))
-        s1 = 2 * d * (L1 * sin1 - L2 * sin_u)
-        s3 = 2 * L2 * (L1 * sin_w + d * sin_u)
-        s11 = 2 * d * (L1 * cos1 - L2 * cos_u)
-        s13 = 2 * d * L2 * cos_u
-        s33 = 2 * L2 * (L1 * cos_w - d * cos_u)
-        length = math.sqrt(sq)
-        inv2l = 0.5 / length
-        inv4l3 = inv2l / (2.0 * sq)
-        return TendonGeometry(length, s1 * inv2l, s3 * inv2l,
-                              s11 * inv2l - s1 * s1 * inv4l3,
-                              s13 * inv2l - s1 * s3 * inv4l3,
-                              s33 * inv2l - s3 * s3 * inv4l3)
+        return TendonGeometry(*tendon_terms(self.L1, self.L2, self.d_t, self.beta, th1, th3))
 
     def tendon_length(self, th1: float, th3: float) -> float:
         return self.tendon(th1, th3).length

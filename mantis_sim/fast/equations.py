@@ -11,6 +11,7 @@ import math
 from numba import njit
 import numpy as np
 
+from .. import mechanism
 from .layout import (
     EV_ARM_STOPS,
     EV_LATCH_MARGIN,
@@ -43,25 +44,13 @@ DYN_SIZE = 10
 WS_THETA1_GUESS, WS_RHS_EVALS, WS_SIZE = 0, 1, 2
 
 
+_tendon_terms = njit(cache=True)(mechanism.tendon_terms)
+
+
 @njit(cache=True)
 def tendon(th1, th3, p):
     """mechanism.Mechanism.tendon: (length, d1, d3, d11, d13, d33)."""
-    l1, l2, d = p[L1], p[L2], p[D_T]
-    u = th1 - th3 - p[BETA]
-    w = th3 + p[BETA]
-    cos_u, sin_u, cos_w, sin_w = math.cos(u), math.sin(u), math.cos(w), math.sin(w)
-    cos1, sin1 = math.cos(th1), math.sin(th1)
-    sq = (l1 * l1 + l2 * l2 + d * d - 2 * l1 * l2 * cos_w - 2 * d * (l1 * cos1 - l2 * cos_u))
-    s1 = 2 * d * (l1 * sin1 - l2 * sin_u)
-    s3 = 2 * l2 * (l1 * sin_w + d * sin_u)
-    s11 = 2 * d * (l1 * cos1 - l2 * cos_u)
-    s13 = 2 * d * l2 * cos_u
-    s33 = 2 * l2 * (l1 * cos_w - d * cos_u)
-    length = math.sqrt(sq)
-    inv2l = 0.5 / length
-    inv4l3 = inv2l / (2.0 * sq)
-    return (length, s1 * inv2l, s3 * inv2l, s11 * inv2l - s1 * s1 * inv4l3,
-            s13 * inv2l - s1 * s3 * inv4l3, s33 * inv2l - s3 * s3 * inv4l3)
+    return _tendon_terms(p[L1], p[L2], p[D_T], p[BETA], th1, th3)
 
 
 @njit(cache=True)
