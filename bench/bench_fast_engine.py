@@ -3,10 +3,9 @@ rigid one (prints figures and writes docs/fast_engine_benchmark.md; not a test).
 
     .venv/bin/python bench/bench_fast_engine.py [--repeats 5]
 
-1. Every shipped scene at its own tolerance (on the fast path, whatever its solver): the median
-   wall time of one strike (the
-   simulation, trajectory and metrics) on the fast path and on scipy's Radau, and how far
-   apart their peak tip speeds are.
+1. Every shipped scene at its own tolerance: the median wall time of one strike (the
+   simulation, trajectory and metrics) on the fast path and on scipy's Radau, whatever the
+   scene's own solver, and how far apart their peak tip speeds are.
 2. air_23mm_compliant at 1e6 N/mm against the same scene with a rigid tendon, both on the
    fast path at the scene's tolerance: wall time, and the error in peak tip speed and spring
    energy against the compliant tendon solved in full (its ringing resolved) at rtol 1e-8.
