@@ -9,12 +9,14 @@ import sys
 
 FALLBACK_SOLVER = 'Radau'
 _said: set = set()
+_loaded = False
 
 
 def segments_for(model):
     """The compiled segments of a built model, or None where the fast engine cannot take it:
     then one line on stderr says why (once per reason and process) and the caller integrates
     with scipy's FALLBACK_SOLVER instead."""
+    global _loaded
     try:
         from . import layout
         from .segment import FastSegments
@@ -23,6 +25,10 @@ def segments_for(model):
         return _fall_back(f'numba is not importable ({exc})')
     except TypeError as exc:
         return _fall_back(str(exc))
+    if not _loaded:
+        # load the engine now, so that no strike's own wall time counts numba's start
+        _loaded = True
+        warm_up()
     return FastSegments(model, params)
 
 

@@ -22,6 +22,8 @@ def summary_text(result: SimulationResult) -> str:
              f'solver {m["solver"]} rtol {m["rtol"]:g}: {m["wall_time_s"] * 1e3:.1f} ms wall, '
              f'{m["rhs_evals"]} right-hand-side evaluations',
              'phase  start (s)      duration']
+    if m.get('rigid_tendon_limit'):
+        lines.insert(2, m['rigid_tendon_limit'])
     for p in PHASES:
         duration = m['phase_duration_s'][p]
         text = 'not reached' if duration is None else (
