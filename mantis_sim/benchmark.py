@@ -49,14 +49,8 @@ def _run_scene(scene_name: str, solver: str, rtol: float, overrides=()):
     return simulate(scene).metrics
 
 
-def accuracy_table(scene_name: str, repeats: int = 5, overrides=(),
-                   enough_error: float | None = None) -> Table:
-    """``overrides``: scene parameters set first (``key=value``, as `mantis sim --set`).
-
-    With ``enough_error``, each solver's ladder stops at the first (loosest) tolerance whose
-    peak tip speed is within it: a tighter tolerance of the same solver takes more steps for
-    an accuracy no longer asked for (what `mantis sweep --accuracy` needs, in a fraction of the
-    time)."""
+def accuracy_table(scene_name: str, repeats: int = 5, overrides=()) -> Table:
+    """``overrides``: scene parameters set first (``key=value``, as `mantis sim --set`)."""
     def run(solver, rtol):
         return _run_scene(scene_name, solver, rtol, overrides)
     warm_up()           # the fast path's first strike in a process loads the engine
@@ -77,19 +71,10 @@ def accuracy_table(scene_name: str, repeats: int = 5, overrides=(),
                             m['rhs_evals'], abs(m['peak_tip_speed_mps'] - v_ref) / v_ref,
                             abs(t_iv - t_ref) * 1e6 if t_iv is not None else float('inf'),
                             m['energy_balance_residual_mJ']))
-            if enough_error is not None and rows[-1].tip_speed_error <= enough_error:
-                break
     for row in rows:
         row.pareto = not any(o.wall_ms < row.wall_ms and o.tip_speed_error < row.tip_speed_error
                              for o in rows)
     return Table(scene_name, v_ref, t_ref, disagreement, disagreement_iv_us, rows)
-
-
-def cheapest_row(table: Table, rel_error: float) -> Row | None:
-    """The fastest (solver, tolerance) whose peak tip speed is within ``rel_error`` of the
-    reference: "what accuracy costs in time", put to work. None if no row reaches it."""
-    reaching = [row for row in table.rows if row.tip_speed_error <= rel_error]
-    return min(reaching, key=lambda row: row.wall_ms) if reaching else None
 
 
 def format_table(table: Table, markdown: bool = False) -> str:

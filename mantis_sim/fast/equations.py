@@ -483,13 +483,10 @@ OBS_SIZE = 8
 
 
 @njit(cache=True)
-def observe(t, s, latched, taut, saturated, stuck_at, slip, p, knots, ws, d, out):
+def observe(t, s, mode, p, knots, ws, d, out):
     """One trajectory row's derived values at the full state s (results._trajectory): the
-    dynamics at s (a latched arm on a taut rigid tendon solves its theta1 from s's), tip
-    speed, spring, kinetic and mechanical energy, tendon and free length."""
-    y = np.empty(6)
-    _mode_y(s, latched, taut, saturated, p, ws, y)
-    dynamics(t, y, latched, taut, saturated, stuck_at, slip, p, knots, ws, d)
+    dynamics at s, tip speed, spring, kinetic and mechanical energy, tendon and free length."""
+    state_dynamics(t, s, mode, p, knots, ws, d)
     kinetic = kinetic_energy(s[1], s[2], s[3], p)
     length = tendon(s[0], s[1], p)[0]
     free = free_length(t, p, knots)[0]
@@ -506,26 +503,28 @@ def observe(t, s, latched, taut, saturated, stuck_at, slip, p, knots, ws, d, out
 
 
 @njit(cache=True)
-def _mode_y(s, latched, taut, saturated, p, ws, y):
-    """The mode's integrated state from the full state s (hybrid._pack); a latched arm on a
-    taut rigid tendon starts its Newton solve for theta1 from s's."""
-    if constrained(latched, taut, saturated, p):
-        ws[WS_THETA1_GUESS] = s[0]
-        y[0], y[1] = s[4], s[5]
-    elif latched:
-        y[0], y[1], y[2], y[3] = s[0], s[2], s[4], s[5]
-    else:
-        for i in range(6):
-            y[i] = s[i]
+def mode_dynamics(t, y, mode, p, knots, ws, out):
+    """dynamics() in the mode of a mode vector (radau.MODE_SIZE: latched, taut, saturated,
+    stuck_at (NaN: at the contact), slip)."""
+    dynamics(t, y, mode[0] != 0.0, mode[1] != 0.0, mode[2] != 0.0, mode[3], mode[4], p, knots,
+             ws, out)
 
 
 @njit(cache=True)
 def state_dynamics(t, s, mode, p, knots, ws, out):
-    """hybrid.HybridSimulator._state_dynamics: the dynamics at a full state s."""
+    """hybrid.HybridSimulator._state_dynamics: the dynamics at a full state s, from the mode's
+    integrated state (hybrid._pack); a latched arm on a taut rigid tendon starts its Newton
+    solve for theta1 from s's."""
     y = np.empty(6)
-    latched, taut, saturated = mode[0] != 0.0, mode[1] != 0.0, mode[2] != 0.0
-    _mode_y(s, latched, taut, saturated, p, ws, y)
-    dynamics(t, y, latched, taut, saturated, mode[3], mode[4], p, knots, ws, out)
+    if constrained(mode[0] != 0.0, mode[1] != 0.0, mode[2] != 0.0, p):
+        ws[WS_THETA1_GUESS] = s[0]
+        y[0], y[1] = s[4], s[5]
+    elif mode[0] != 0.0:
+        y[0], y[1], y[2], y[3] = s[0], s[2], s[4], s[5]
+    else:
+        for i in range(6):
+            y[i] = s[i]
+    mode_dynamics(t, y, mode, p, knots, ws, out)
 
 
 @njit(cache=True)
@@ -538,8 +537,7 @@ def full_states(ts, ys, mode, p, knots, ws):
         if n == 6:
             out[r] = ys[r]
             continue
-        dynamics(ts[r], ys[r], mode[0] != 0.0, mode[1] != 0.0, mode[2] != 0.0, mode[3],
-                 mode[4], p, knots, ws, d)
+        mode_dynamics(ts[r], ys[r], mode, p, knots, ws, d)
         full_state(ys[r], n, d, out[r])
     return out
 
@@ -551,6 +549,5 @@ def observe_rows(ts, states, mode, p, knots, ws):
     out = np.empty((rows, OBS_SIZE))
     d = np.empty(DYN_SIZE)
     for r in range(rows):
-        observe(ts[r], states[r], mode[0] != 0.0, mode[1] != 0.0, mode[2] != 0.0, mode[3],
-                mode[4], p, knots, ws, d, out[r])
+        observe(ts[r], states[r], mode, p, knots, ws, d, out[r])
     return out

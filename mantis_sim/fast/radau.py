@@ -49,16 +49,14 @@ MODE_SIZE = 5
 
 @njit(cache=True)
 def _rhs(t, y, n, mode, p, knots, ws, d, f):
-    eq.dynamics(t, y, mode[0] != 0.0, mode[1] != 0.0, mode[2] != 0.0, mode[3], mode[4], p,
-                knots, ws, d)
+    eq.mode_dynamics(t, y, mode, p, knots, ws, d)
     eq.rhs_from(d, n, f)
 
 
 @njit(cache=True)
 def _events(t, y, n, mode, p, knots, ws, d, scratch, kinds, consts, g):
     """Every event function at (t, y) into g."""
-    eq.dynamics(t, y, mode[0] != 0.0, mode[1] != 0.0, mode[2] != 0.0, mode[3], mode[4], p,
-                knots, ws, d)
+    eq.mode_dynamics(t, y, mode, p, knots, ws, d)
     _event_values(t, y, mode, p, knots, d, scratch, kinds, consts, g)
 
 
@@ -214,8 +212,7 @@ def _event_root(k, t_old, h, y_old, q, g_lo, g_hi, n, mode, p, knots, ws, d, scr
         else:
             xcur += delta if sbis > 0 else -delta
         _dense(y_old, q, (xcur - t_old) / h, y)
-        eq.dynamics(xcur, y, mode[0] != 0.0, mode[1] != 0.0, mode[2] != 0.0, mode[3],
-                    mode[4], p, knots, ws, d)
+        eq.mode_dynamics(xcur, y, mode, p, knots, ws, d)
         fcur = eq.event_value(kinds[k], consts[k], xcur, y, d, mode[0] != 0.0, mode[3], p,
                               knots, scratch)
     return xcur
