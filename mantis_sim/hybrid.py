@@ -697,10 +697,12 @@ class HybridSimulator:
         return (self.model.kinetic_energy(s[1], s[2], s[3])
                 + self.model.potential_energy(s[0], s[1], t))
 
-    def tensions_at(self, segment: Segment, times) -> np.ndarray:
-        """Tendon tension (N) at times within a segment simulated with dense output."""
+    def tensions_at(self, segment: Segment, times, states=None) -> np.ndarray:
+        """Tendon tension (N) at times within a segment simulated with dense output (at the
+        full states there, if the caller has them)."""
         times = np.asarray(times, dtype=float)
-        states = segment.dense.states(times)
+        if states is None:
+            states = segment.dense.states(times)
         if self.fast is not None:
             from .fast.equations import OBS_TENSION
             return self.fast.observe(segment, times, states)[:, OBS_TENSION]

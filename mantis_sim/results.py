@@ -58,10 +58,6 @@ class SimulationResult:
         return {**{key: self.metrics[key] for key in JSON_KEYS},
                 WARNINGS: list(self.metrics[WARNINGS])}
 
-    def _segment_at(self, t_ms: float):
-        """The first segment whose span holds t_ms (None: outside the run)."""
-        return next((seg for seg in self.raw.segments if seg.t[0] <= t_ms <= seg.t[-1]), None)
-
     def _segment_index(self, times_ms: np.ndarray) -> np.ndarray:
         """For each time, the first segment whose span holds it (-1: outside the run)."""
         index = np.full(times_ms.size, -1)
@@ -76,35 +72,32 @@ class SimulationResult:
 
     def state_at(self, t_ms: float) -> Optional[tuple]:
         """Interpolated (th1, th3, w1, w3) at t_ms, when simulated with dense output."""
-        seg = self._segment_at(t_ms)
+        k = self._segment_index(np.array([float(t_ms)]))[0]
+        seg = self.raw.segments[k] if k >= 0 else None
         return seg.dense(t_ms)[:4] if seg is not None and seg.dense is not None else None
 
-    def states_at(self, times_ms) -> np.ndarray:
+    def states_and_forces_at(self, times_ms) -> tuple[np.ndarray, np.ndarray]:
         """Full states (rows: theta1, theta3 rad, omega1, omega3 rad/ms, drive work,
-        dissipated mJ) at any times (ms) of a run simulated with ``dense=True``, from the
-        integrator's continuous solution; NaN outside the run."""
-        self._need_dense('states_at')
+        dissipated mJ) and the tendon tension (N) at any times (ms) of a run simulated with
+        ``dense=True``, from the integrator's continuous solution; NaN outside the run."""
+        self._need_dense('states_and_forces_at')
         times = np.atleast_1d(np.asarray(times_ms, dtype=float))
-        out = np.full((times.size, 6), np.nan)
+        states = np.full((times.size, 6), np.nan)
+        forces = np.full(times.size, np.nan)
         index = self._segment_index(times)
         for k in np.unique(index[index >= 0]):
-            at = index == k
-            out[at] = self.raw.segments[k].dense.states(times[at])
-        return out
+            at, seg = index == k, self.raw.segments[k]
+            states[at] = seg.dense.states(times[at])
+            forces[at] = self.simulator.tensions_at(seg, times[at], states[at])
+        return states, forces
 
     def tendon_force_at(self, times_ms) -> np.ndarray:
-        """Tendon tension (N) at any times (ms) of a run simulated with ``dense=True``, from the
-        integrator's continuous solution; NaN outside the run. The trajectory holds the steps
-        only, up to 0.2 ms apart where the strike's force rises at 30 N/ms: a straight line
-        between them misses that curve by 0.2 N."""
+        """Tendon tension (N) at any times (ms) of a run simulated with ``dense=True``
+        (states_and_forces_at). The trajectory holds the steps only, up to 0.2 ms apart where
+        the strike's force rises at 30 N/ms: a straight line between them misses that curve by
+        0.2 N."""
         self._need_dense('tendon_force_at')
-        times = np.atleast_1d(np.asarray(times_ms, dtype=float))
-        out = np.full(times.size, np.nan)
-        index = self._segment_index(times)
-        for k in np.unique(index[index >= 0]):
-            at = index == k
-            out[at] = self.simulator.tensions_at(self.raw.segments[k], times[at])
-        return out
+        return self.states_and_forces_at(times_ms)[1]
 
 
 def simulate(scene: Scene, dense: bool = False) -> SimulationResult:

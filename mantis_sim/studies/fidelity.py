@@ -105,8 +105,8 @@ def _sampled_series(result, medium: str) -> StrikeSeries:
     t_iv_ms = result.metrics['phase_start_s']['IV'] * 1e3
     grid = series_grid(medium)
     times_ms = t_iv_ms + grid * 1e3
-    states = result.states_at(times_ms)
-    return StrikeSeries(grid, states[:, 0], states[:, 1], result.tendon_force_at(times_ms))
+    states, forces = result.states_and_forces_at(times_ms)
+    return StrikeSeries(grid, states[:, 0], states[:, 1], forces)
 
 
 def real_on_grid(series: StrikeSeries, medium: str) -> StrikeSeries:
