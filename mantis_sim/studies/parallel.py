@@ -94,12 +94,6 @@ def check_reachable(scheduler: str) -> None:
 
 
 
-def _one_blas_thread(function: Callable, item):
-    """function(item) with BLAS on one thread, as on any worker (mantis_sim.blas)."""
-    one_blas_thread()
-    return function(item)
-
-
 def _batch(function: Callable, items: list) -> list:
     """[function(item) for item in items]: one task of a map, on a worker."""
     one_blas_thread()
@@ -147,8 +141,9 @@ class ClusterMap:
         results: list = [None] * len(items)
         try:
             if self.client is None:
+                one_blas_thread()                   # as on any worker (mantis_sim.blas)
                 for i, item in enumerate(items):
-                    results[i] = _one_blas_thread(function, item)
+                    results[i] = function(item)
                     if bar:
                         bar.advance(1)
                 return results
