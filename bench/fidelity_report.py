@@ -677,7 +677,8 @@ parameters): a compliant tendon (Kevlar, load cell and stage in series), and Cou
 the arm's pivot in proportion to the tendon force (effect `pivot_friction`), which holds the
 arm on the body past overcentering, brakes its swing and stops it where it cannot overcome it.
 What its accuracy costs in time: [accuracy_air_23mm.md](accuracy_air_23mm.md) (the scenes run
-Radau at rtol 1e-5, on the Pareto front: within 1e-6 of the converged tip speed in under 0.1 s; the
+the fast path, the compiled Radau of `mantis_sim.fast`, at rtol 1e-5: within 1e-6 of the converged
+tip speed in about 3 ms a strike, [fast_engine_benchmark.md](fast_engine_benchmark.md); the
 explicit solvers need 40,000+ evaluations for the stiff tendon). Identifying the whole training
 set: [identify_benchmark.md](identify_benchmark.md).
 
