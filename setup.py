@@ -47,7 +47,7 @@ setup(
         # the design studies (mantis_sim.studies: mantis sweep, sweep-plot); pins as in
         # requirements.txt, which installs them for the project's own .venv
         'studies': ['dask==2026.8.0', 'distributed==2026.8.0', 'pyarrow==26.0.1',
-                    'threadpoolctl==3.8.0'],
+                    'threadpoolctl==3.8.0', 'statsmodels==0.15.0'],
     },
     zip_safe=False,     # the scenes are read as files from the installed package
     maintainer='mantis_rig maintainers',

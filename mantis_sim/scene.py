@@ -30,6 +30,7 @@ from .parameters import (
     Tendon,
     build_section,
 )
+from .spread import Spread
 
 # Each effect is a term of the model or of a sensor, assembled only when a scene enables it.
 EFFECTS = {
@@ -84,6 +85,9 @@ class Scene:
     integration: Integration = Integration()
     # Where an identified scene's values come from (`mantis identify`): kept, never simulated.
     provenance: Optional[dict] = field(default=None, compare=False, hash=False)
+    # How robots of this design scatter (`mantis identify --spread`; mantis_sim.spread): drawn
+    # by `--spread N`, never by a single simulation.
+    spread: Optional[Spread] = field(default=None, compare=False, hash=False)
 
     def has(self, effect: str) -> bool:
         return effect in self.effects
@@ -190,16 +194,19 @@ def scene_from_dict(data, name: str = '<scene>') -> Scene:
     if provenance is not None and not isinstance(provenance, dict):
         raise SceneError(f'{scene_name}: provenance must be a mapping, got '
                          f'{type(provenance).__name__}')
+    spread = data.pop('spread', None)
+    if spread is not None:
+        spread = Spread.from_mapping(spread, f'{scene_name}')
     effects = _effects(data.pop('effects', []), scene_name)
     sections = {}
     for key, value in data.items():
         if key not in SECTIONS:
             raise ParameterError(f'{scene_name}: unknown key {key!r} (= {value!r}); valid '
-                                 f'keys: name, description, effects, provenance, '
+                                 f'keys: name, description, effects, provenance, spread, '
                                  f'{", ".join(SECTIONS)}')
         sections[key] = build_section(key, value or {})
     scene = Scene(name=str(scene_name), description=str(description), effects=effects,
-                  provenance=provenance, **sections)
+                  provenance=provenance, spread=spread, **sections)
     _check_consistency(scene)
     return scene
 

@@ -19,7 +19,7 @@ import yaml
 
 from mantis_sim.errors import InputError
 from mantis_sim.scene import available_scenes, load_scene
-from mantis_sim.studies import fidelity
+from mantis_sim.studies import fidelity, forecast, spread_fit
 from mantis_sim.studies import identify as ident
 from mantis_sim.studies.parallel import ClusterMap
 from mantis_sim.studies.strikes import (
@@ -40,10 +40,19 @@ def add_commands(commands) -> None:
                     'at its own conditions; write one calibrated scene per group with its '
                     'provenance, standard errors and correlations.')
     _strike_arguments(ident_cmd)
-    ident_cmd.add_argument('--fit', action='append', required=True,
+    ident_cmd.add_argument('--fit', action='append', default=[],
                            metavar='KEY[@GROUP[+GROUP]][=LO:HI]',
                            help='a parameter to fit, for all groups or only the named ones, '
                                 'within bounds (default: its valid range); repeatable')
+    ident_cmd.add_argument('--spread', action='store_true',
+                           help='also fit the spread of the strikes (where the arm sits by day '
+                                'and by strike, the parameters\' uncertainty, the discrepancy: '
+                                'docs/spread.md) and write it into each scene; without --fit, '
+                                'the scenes\' parameters are kept as they are')
+    ident_cmd.add_argument('--spread-latent', default=spread_fit.DEFAULT_LATENT,
+                           metavar='KEY=LO:HI',
+                           help='the scene key through which strikes of one design differ, '
+                                f'within bounds (default {spread_fit.DEFAULT_LATENT})')
     ident_cmd.add_argument('--per-day', action='append', default=[],
                            metavar='KEY[@GROUP[+GROUP]][=LO:HI]',
                            help='also fit this key for each recording day on its own, as a '
@@ -84,6 +93,14 @@ def add_commands(commands) -> None:
     compare.add_argument('--out', type=Path, required=True, help='folder for the outputs')
     compare.add_argument('--figure', action='append', default=[], metavar='TRIAL',
                          help='a trial to plot (theta1, theta3 and rates); repeatable')
+    compare.add_argument('--spread', type=int, default=0, metavar='N',
+                         help='also forecast each strike from N robots drawn from its scene\'s '
+                              'spread: predictions.csv (q05..q95 per strike), the coverage of '
+                              'the 50 %% and 80 %% intervals and the CRPS against the '
+                              'climatological forecast per group (spread_scores.csv), '
+                              'forecasts.png')
+    compare.add_argument('--seed', type=int, default=1,
+                         help='seed of the robots drawn by --spread (default 1)')
     _at_seat_argument(compare)
     compare.set_defaults(run=run_compare)
 
@@ -170,6 +187,11 @@ def _log(message: str) -> None:
 def run_identify(args) -> int:
     strikes = _load_strikes(args)
     scenes, paths = _scenes(args, strikes)
+    if not args.fit and not args.spread:
+        raise InputError('identify: nothing to fit: give --fit KEY (repeatable), --spread, or '
+                         'both')
+    if not args.fit:
+        return _identify_spread_only(args, strikes, scenes, paths)
     params = [ident.parse_free_parameter(text, scenes) for text in args.fit]
     per_day = [ident.parse_free_parameter(text, scenes, option='--per-day')
                for text in args.per_day]
@@ -209,19 +231,89 @@ def run_identify(args) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     sources = [str(args.strikes)] + ([str(args.processed)] if args.processed else []) + [
         t.partition('=')[2] for t in args.export]
-    written = []
+    written, dropped = [], []
     for group, path in paths.items():
         base = yaml.safe_load(path.read_text(encoding='utf-8'))
+        if 'spread' in base and not args.spread:
+            dropped.append(group)
         doc = ident.calibrated_scene(base, fit, group, folds, sources, cv_method, weights)
         target = args.out / path.name
         target.write_text(yaml.safe_dump(doc, sort_keys=False, width=100), encoding='utf-8')
         written.append(str(target))
     report = _identify_report(fit, folds, written)
+    if dropped:
+        _log(f'identify: the spread of {", ".join(dropped)} was fitted about the parameters '
+             f'this fit replaced: not written; add --spread to fit it again')
+    if args.spread:
+        calibrated = {g: load_scene(str(args.out / paths[g].name)) for g in paths}
+        with ClusterMap(args.scheduler, args.workers, progress=not args.json) as mapper:
+            report['spread'] = _fit_and_write_spreads(args, mapper, strikes, calibrated, {
+                g: args.out / p.name for g, p in paths.items()})
     if args.json:
         print(json.dumps(json_safe(report)))
     else:
         print(_identify_text(report))
+        if 'spread' in report:
+            print(_spread_text(report['spread']))
     return 0
+
+
+def _identify_spread_only(args, strikes, scenes, paths) -> int:
+    """`mantis identify --spread` without --fit: each scene as it is, with its spread."""
+    check_out_folder(args.out)
+    with ClusterMap(args.scheduler, args.workers, progress=not args.json) as mapper:
+        _log(f'identify: the spread of {len(strikes)} strikes ({", ".join(sorted(scenes))}) on '
+             f'{mapper.where}; the scenes\' parameters kept')
+        args.out.mkdir(parents=True, exist_ok=True)
+        targets = {g: args.out / p.name for g, p in paths.items()}
+        for group, path in paths.items():
+            if targets[group].resolve() != path.resolve():
+                targets[group].write_text(path.read_text(encoding='utf-8'), encoding='utf-8')
+        report = {'spread': _fit_and_write_spreads(args, mapper, strikes, scenes, targets),
+                  'scenes': [str(t) for t in targets.values()]}
+    if args.json:
+        print(json.dumps(json_safe(report)))
+    else:
+        print(_spread_text(report['spread']) + '\nscenes: ' + ', '.join(report['scenes']))
+    return 0
+
+
+def _fit_and_write_spreads(args, mapper, strikes, scenes, targets) -> dict:
+    """Fit the spread (spread_fit) and write it into each group's scene file at ``targets``;
+    the report's 'spread' entry."""
+    sources = [str(args.strikes)] + ([str(args.processed)] if args.processed else [])
+    spreads, latents, model = spread_fit.fit_spreads(
+        scenes, strikes, mapper, args.spread_latent, sources=sources, log=_log)
+    for group, target in targets.items():
+        doc = yaml.safe_load(target.read_text(encoding='utf-8'))
+        doc['spread'] = json_safe(spreads[group].to_mapping())
+        target.write_text(yaml.safe_dump(doc, sort_keys=False, width=100), encoding='utf-8')
+    report = {'latent': model.key,
+              'means': {g: {'value': m, 'std_error': se} for g, (m, se) in model.means.items()},
+              'day_sd': {'value': model.day_sd, 'std_error': model.day_sd_std_error},
+              'strike_sd': {'value': model.strike_sd, 'std_error': model.strike_sd_std_error},
+              'days': model.days, 'strikes': model.strikes,
+              'discrepancy': {d.metric: {'bias': d.bias, 'bias_std_error': d.bias_std_error,
+                                         'sd': d.sd}
+                              for d in next(iter(spreads.values())).discrepancy},
+              'strike_latents': {x.strike.trial: x.value for x in latents}}
+    return report
+
+
+def _spread_text(spread: dict) -> str:
+    lines = [f'spread: {spread["latent"]} over {spread["strikes"]} strikes of '
+             f'{spread["days"]} recording days (mixed model, REML)',
+             '  group        mean (s.e.)']
+    lines += [f'  {g:12s} {m["value"]:+6.2f} ({m["std_error"]:.2f})'
+              for g, m in spread['means'].items()]
+    lines.append(f'  between days: sd {spread["day_sd"]["value"]:.2f} '
+                 f'({spread["day_sd"]["std_error"]:.2f}); within a day: sd '
+                 f'{spread["strike_sd"]["value"]:.2f} ({spread["strike_sd"]["std_error"]:.2f})')
+    lines.append('  discrepancy, measured/simulated - 1, every group: bias (s.e.), scatter (sd)')
+    for metric, d in spread['discrepancy'].items():
+        lines.append(f'  {metric:20s} {100 * d["bias"]:+5.1f} % ({100 * d["bias_std_error"]:.1f} '
+                     f'%)  {100 * d["sd"]:.1f} %')
+    return '\n'.join(lines)
 
 
 def _seats(strikes: list[RealStrike]) -> dict:
@@ -316,11 +408,15 @@ def run_compare(args) -> int:
     if no_motion:
         raise InputError(f'--figure {", ".join(no_motion)}: no recorded motion (give '
                          f'--processed or --export for it)')
+    if args.spread:
+        _check_spread_request(args, scenes)
     check_out_folder(args.out)
     with ClusterMap(args.scheduler, args.workers, progress=not args.json) as mapper:
         model = ident.StrikeModel(scenes, strikes, [], ident.Weights(), mapper,
                                   at_seat=args.at_seat)
         simulated = model.simulate([[]])[0]
+        forecasts = (forecast.forecast_strikes(scenes, strikes, args.spread, args.seed, mapper)
+                     if args.spread else None)
     from mantis_sim.studies import compare_plots
     args.out.mkdir(parents=True, exist_ok=True)
     rows = fidelity.error_rows(strikes, simulated)
@@ -337,13 +433,68 @@ def run_compare(args) -> int:
               'effects': fidelity.effect_slopes(rows),
               'not_struck': [{'trial': r['trial'], 'status': r['status'], 'reason': r['reason']}
                              for r in rows if r['status'] != 'strike'],
-              'at_seat': _seats(strikes) if args.at_seat else None,
-              'outputs': sorted(str(p) for p in args.out.iterdir())}
+              'at_seat': _seats(strikes) if args.at_seat else None}
+    if forecasts is not None:
+        report['spread'] = _write_forecasts(forecasts, args, compare_plots)
+    report['outputs'] = sorted(str(p) for p in args.out.iterdir())
     if args.json:
         print(json.dumps(json_safe(report)))
     else:
         print(_compare_text(report))
     return 0
+
+
+def _check_spread_request(args, scenes) -> None:
+    if args.spread < 2:
+        raise InputError(f'--spread {args.spread}: a spread needs at least 2 robots per strike')
+    if args.at_seat:
+        raise InputError('--spread draws where each arm sits from the scene\'s spread, which '
+                         '--at-seat would set from the tracks: use one or the other')
+    missing = sorted(g for g, scene in scenes.items() if scene.spread is None)
+    if missing:
+        raise InputError(f'--spread: no spread in the scene of {", ".join(missing)}: fit one '
+                         f'with `mantis identify --spread` (docs/spread.md)')
+
+
+def _write_forecasts(forecasts, args, compare_plots) -> dict:
+    """predictions.csv, spread_scores.csv and forecasts.png; the report's 'spread' entry."""
+    rows = forecast.prediction_rows(forecasts)
+    with open(args.out / 'predictions.csv', 'w', newline='', encoding='utf-8') as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    scores = forecast.scores(forecasts)
+    columns = ['metric', 'group', 'strikes', 'coverage_50', 'coverage_80', 'crps',
+               'crps_climatology', 'crps_ratio', 'median_abs_error_q50']
+    with open(args.out / 'spread_scores.csv', 'w', newline='', encoding='utf-8') as handle:
+        writer = csv.DictWriter(handle, fieldnames=columns, extrasaction='ignore')
+        writer.writeheader()
+        for metric, groups in scores.items():
+            for group, entry in groups.items():
+                writer.writerow({'metric': metric, 'group': group, **entry})
+    compare_plots.plot_forecasts(forecasts, args.out / 'forecasts.png')
+    return {'robots_per_strike': args.spread, 'seed': args.seed, 'scores': scores,
+            'robots_not_struck': sum(f.not_struck for f in forecasts)}
+
+
+def _forecast_lines(spread: dict) -> list[str]:
+    lines = [f'forecasts from {spread["robots_per_strike"]} robots per strike (seed '
+             f'{spread["seed"]}): group, strikes, intervals holding the measured value (50 % / '
+             f'80 %), CRPS against the climatology\'s, median |error| of the median']
+    for metric, groups in spread['scores'].items():
+        _, label, unit = forecast.FORECAST_METRICS[metric]
+        lines.append(f'{label}:')
+        for group, e in groups.items():
+            if not e['strikes']:
+                continue
+            lines.append(f'  {group:11s} {e["strikes"]:3d}  {100 * e["coverage_50"]:3.0f} % / '
+                         f'{100 * e["coverage_80"]:3.0f} %  {e["crps"]:.3g} {unit} against '
+                         f'{e["crps_climatology"]:.3g} ({e["crps_ratio"]:.2f}x)  '
+                         f'{100 * e["median_abs_error_q50"]:.1f} %')
+    if spread['robots_not_struck']:
+        lines.append(f'{spread["robots_not_struck"]} drawn robots did not strike (left out of '
+                     f'their forecasts)')
+    return lines
 
 
 def _compare_text(report: dict) -> str:
@@ -369,5 +520,7 @@ def _compare_text(report: dict) -> str:
         lines.append(f'{r["status"]}: {r["trial"]}: {r["reason"]}')
     if report['at_seat']:
         lines.append(_seat_line(report['at_seat']))
+    if 'spread' in report:
+        lines += _forecast_lines(report['spread'])
     lines.append('outputs: ' + ', '.join(report['outputs']))
     return '\n'.join(lines)

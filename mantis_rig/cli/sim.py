@@ -5,12 +5,17 @@ import json
 from pathlib import Path
 import sys
 
+from mantis_sim.errors import InputError
 from mantis_sim.parameters import SECTIONS, describe
 from mantis_sim.results import WARNINGS, simulate
 from mantis_sim.scene import EFFECTS, available_scenes, load_scene
 from mantis_sim.studies import strike_report
 
 from ..contract import FORCE_CEILING
+from .options import json_safe
+
+#: Robots drawn by `mantis sim --spread` without N (docs/spread_benchmark.md: what N costs).
+DEFAULT_ROBOTS = 200
 
 
 def add_commands(commands) -> None:
@@ -24,6 +29,12 @@ def add_commands(commands) -> None:
     sim.add_argument('--json', action='store_true', help='print the metrics as one JSON object')
     sim.add_argument('--out', type=Path, help='write the trajectory as CSV to this file')
     sim.add_argument('--plot', type=Path, help='write a PNG plot of the trial to this file')
+    sim.add_argument('--spread', type=int, nargs='?', const=DEFAULT_ROBOTS, metavar='N',
+                     help='draw N robots from the scene\'s spread (where the arm sits, the '
+                          'identified parameters, the discrepancy: docs/spread.md) and print '
+                          f'the quantiles q05..q95 of each metric (N default {DEFAULT_ROBOTS})')
+    sim.add_argument('--seed', type=int, default=1,
+                     help='seed of the robots drawn by --spread (default 1)')
     sim.set_defaults(run=run_sim)
 
     scenes = commands.add_parser('scenes', help='list scenes, effects and parameters')
@@ -64,6 +75,8 @@ def ceiling_warning(peak_force_n: float) -> list[str]:
 
 def run_sim(args) -> int:
     scene = _scene_from_args(args)
+    if args.spread is not None:
+        return _run_spread(args, scene)
     result = simulate(scene)
     warnings = result.metrics[WARNINGS] + ceiling_warning(result.metrics['peak_tendon_force_N'])
     if args.out:
@@ -82,6 +95,45 @@ def run_sim(args) -> int:
     for line in warnings:               # in the text, and beside the JSON on stderr
         print(f'warning: {line}', file=sys.stderr if args.json else sys.stdout)
     return 0
+
+
+def _run_spread(args, scene) -> int:
+    from mantis_sim.studies import forecast
+    from mantis_sim.studies.parallel import ClusterMap
+    if args.spread < 2:
+        raise InputError(f'--spread {args.spread}: a spread needs at least 2 robots')
+    if args.out or args.plot:
+        raise InputError('--spread prints quantiles: --out and --plot are for one simulation')
+    if scene.spread is None:
+        raise InputError(f'--spread: scene {scene.name} has no spread; fit one with `mantis '
+                         f'identify --spread` (docs/spread.md)')
+    with ClusterMap(workers=0, progress=not args.json, unit='robots') as mapper:
+        run = forecast.design_spread(scene, args.spread, args.seed, mapper)
+    table = run.quantiles()
+    if args.json:
+        print(json.dumps(json_safe({'scene': scene.name, 'robots': run.robots,
+                                    'seed': args.seed, 'not_struck': run.not_struck,
+                                    'reasons_not_struck': list(run.reasons),
+                                    'quantiles': table})))
+        return 0
+    print(_spread_table(scene.name, run, table, args.seed))
+    return 0
+
+
+def _spread_table(name: str, run, table: dict, seed: int) -> str:
+    from mantis_sim.studies.forecast import DESIGN_METRICS
+    lines = [f'{name}: {run.robots} robots drawn from its spread (seed {seed}); '
+             f'{run.robots - run.not_struck} struck']
+    metrics = list(DESIGN_METRICS)
+    lines.append('quantile' + ''.join(f'{DESIGN_METRICS[m][0]:>13s}' for m in metrics))
+    lines.append('        ' + ''.join(f'{"(" + DESIGN_METRICS[m][2] + ")":>13s}' for m in metrics))
+    for level in table[metrics[0]]:
+        lines.append(f'{level:8s}' + ''.join(f'{table[m][level]:13.5g}' for m in metrics))
+    lines += [f'  {short}: {label} ({metric})' for metric, (short, label, _)
+              in DESIGN_METRICS.items()]
+    for reason in run.reasons:
+        lines.append(f'not struck: {reason}')
+    return '\n'.join(lines)
 
 
 def run_scenes(args) -> int:

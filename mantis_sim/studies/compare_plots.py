@@ -94,3 +94,45 @@ def plot_parity(rows: list[dict], path: Path) -> None:
 
 
 __all__ = ['plot_parity', 'plot_trial']
+
+
+def plot_forecasts(forecasts, path: Path) -> None:
+    """Each strike's measured value in its forecast's 50 % and 80 % intervals (median marked),
+    per metric, and the PIT histogram of the forecasts (flat when they are calibrated)."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    from mantis_sim.spread import pit, quantiles
+
+    from .forecast import FORECAST_METRICS
+    ordered = sorted(forecasts, key=lambda f: (f.strike.group, f.strike.trial))
+    fig, axes = plt.subplots(len(FORECAST_METRICS), 2, figsize=(13, 8),
+                             gridspec_kw={'width_ratios': [3, 1]})
+    for row, (metric, (_, label, unit)) in zip(axes, FORECAST_METRICS.items()):
+        ax, hist = row
+        pits = []
+        for x, f in enumerate(ordered):
+            q = quantiles(f.samples[metric])
+            colour = GROUP_COLOURS.get(f.strike.group, 'grey')
+            ax.vlines(x, q['q10'], q['q90'], colour, lw=2, alpha=0.45)
+            ax.vlines(x, q['q25'], q['q75'], colour, lw=5)
+            ax.plot(x, q['q50'], '_', color='black', ms=9)
+            measured = f.measured(metric)
+            if measured is not None:
+                ax.plot(x, measured, 'kx', ms=6)
+                pits.append(pit(f.samples[metric], measured))
+        ax.set_ylabel(f'{label} ({unit})')
+        ax.set_xlabel('strike (by group)')
+        ax.set_xticks([])
+        for group, colour in GROUP_COLOURS.items():
+            if any(f.strike.group == group for f in ordered):
+                ax.plot([], [], color=colour, lw=5, label=f'{group}: 50 % / 80 % interval')
+        ax.plot([], [], 'kx', label='measured')
+        ax.legend(fontsize=8, loc='best')
+        hist.hist([p for p in pits if np.isfinite(p)], bins=10, range=(0, 1), color='grey')
+        hist.set_xlabel(f'where the measured {label} falls in its forecast (PIT)')
+        hist.set_ylabel('strikes')
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -561,9 +561,12 @@ def calibrated_scene(base: dict, fit: Identification, group: str,
     """A scene file's content (``base``: the group's scene file as a mapping) with the fitted
     values that apply to the group and their provenance: which strikes, when, the residuals,
     each parameter's standard error and the correlations. Where ``base`` was itself identified
-    and keeps parameters this fit held, that fit stays on record as an earlier stage."""
+    and keeps parameters this fit held, that fit stays on record as an earlier stage. A spread
+    in ``base`` was fitted about the parameters this fit replaces: it is dropped (`mantis
+    identify --spread` fits it again)."""
     doc = {k: (dict(v) if isinstance(v, dict) else v) for k, v in base.items()}
     earlier = doc.pop('provenance', None) or {}
+    doc.pop('spread', None)
     labels = [p.label for p in fit.parameters if p.day is None]
     parameters, day_states = {}, {}
     for p, value, std, start in zip(fit.parameters, fit.values, fit.std_errors, fit.initial):

@@ -380,6 +380,8 @@ def test_identify_writes_a_calibrated_scene_with_its_provenance(tmp_path, capsys
     assert 'damping.arm_Nmm_ms_per_rad' in stages[2]['parameters']
     doc = yaml.safe_load((out / 'water_23mm.yaml').read_text())
     assert doc['name'] == 'water_23mm' and doc['medium']['name'] == 'water'
+    # the shipped spread was fitted about the parameters this fit replaced: not carried over
+    assert 'spread' not in doc and load_scene('water_23mm').spread is not None
 
 
 @pytest.mark.parametrize('extra, message', [

@@ -1,0 +1,324 @@
+"""The robot's spread: how far strikes of one design scatter, and how sure the model is.
+
+A scene's `spread` section (written by `mantis identify --spread`, studies/spread_fit.py)
+describes what differs between simulated robots of one design, each part drawn on its own:
+
+- **the latent**: where the arm sits on the latch (`geometry.latch_offset_deg`), which the
+  recorded conditions do not fix. A strike's value is the group's mean, plus its day's
+  assembly, plus its own scatter within the day, each normal (a mixed model over the training
+  strikes' own values). The mean is drawn within its standard error, and the day's standard
+  deviation from its own uncertainty (a scaled inverse chi-square on the days' degrees of
+  freedom: with a handful of days, a new day may lie further out than the fitted value says).
+  A draw beyond the latch's range sits at its end: an arm cannot sit beyond the latch.
+- **the identified parameters**: multivariate normal about the scene's values, from their
+  standard errors and correlations; draws outside a parameter's bounds are clipped to them.
+- **the discrepancy**: what the physics misses, per metric, a relative error: its bias (drawn
+  within its standard error) and its scatter, normal.
+
+The first two go through the simulator, so a design nobody built scatters as its physics
+says; the discrepancy multiplies the simulated metric. The section also keeps the group's
+measured values (`climatology`), the forecast that quotes the lab's past strikes, against
+which a spread is judged.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+import math
+from typing import Optional
+
+import numpy as np
+
+from .parameters import ParameterError
+
+#: The metrics a discrepancy and a climatology are kept for, as a strike report names them.
+METRICS = ('peak_tip_speed_mps', 'spring_energy_mJ')
+#: The quantile levels reported for a spread: q05, q10, ... q95.
+QUANTILE_LEVELS = tuple(round(0.05 * k, 2) for k in range(1, 20))
+
+
+def quantile_label(level: float) -> str:
+    return f'q{round(100 * level):02d}'
+
+
+@dataclass(frozen=True)
+class Latent:
+    """A strike's own value of a scene key: mean + day + strike, each normal (units of key)."""
+    key: str
+    mean: float
+    mean_std_error: float
+    day_sd: float
+    strike_sd: float
+    lower: float        # the draws' range (the key's valid values for the scene's geometry)
+    upper: float
+    day_dof: float = math.inf   # the degrees of freedom of the day variance (days - groups)
+
+
+@dataclass(frozen=True)
+class ParameterSpread:
+    """The identified parameters' joint normal uncertainty (values in their keys' units)."""
+    keys: tuple
+    values: np.ndarray
+    covariance: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+
+
+@dataclass(frozen=True)
+class Discrepancy:
+    """What the physics misses in a metric, relative: measured = simulated * (1 + bias + e),
+    e normal with standard deviation sd."""
+    metric: str
+    bias: float
+    bias_std_error: float
+    sd: float
+
+
+@dataclass(frozen=True)
+class Draws:
+    """N robots drawn from a spread: their scene values and each metric's discrepancy factor."""
+    values: list            # [{key: value}] one per robot
+    factors: dict           # metric -> ndarray (N,) to multiply the simulated metric by
+
+    def __len__(self) -> int:
+        return len(self.values)
+
+
+@dataclass(frozen=True)
+class Spread:
+    latent: Optional[Latent]
+    parameters: Optional[ParameterSpread]
+    discrepancy: tuple
+    climatology: dict       # metric -> tuple of the group's measured values
+    provenance: dict
+
+    def draw(self, n: int, rng: np.random.Generator, contact_angle_deg: float = 0.0) -> Draws:
+        """N robots. ``contact_angle_deg``: the design's, which bounds the latched arm angle
+        (contact angle + latch offset in [0, 15] degrees) when the latent is that offset."""
+        if n < 1:
+            raise ParameterError(f'a spread needs at least one robot, got {n}')
+        values = [{} for _ in range(n)]
+        if self.parameters is not None:
+            for row, draw in zip(values, self._parameter_draws(n, rng)):
+                row.update(zip(self.parameters.keys, map(float, draw)))
+        if self.latent is not None:
+            for row, value in zip(values, self._latent_draws(n, rng, contact_angle_deg)):
+                row[self.latent.key] = float(value)
+        factors = {}
+        for d in self.discrepancy:
+            bias = rng.normal(d.bias, d.bias_std_error, n)
+            factors[d.metric] = 1.0 + bias + rng.normal(0.0, d.sd, n)
+        return Draws(values, factors)
+
+    def one_model(self, rng: np.random.Generator) -> Spread:
+        """This spread with what the data leave uncertain drawn once: the parameters, the
+        latent's mean and day scatter, the discrepancy's bias. What remains is how strikes of
+        one robot model scatter (days, strikes, the discrepancy's scatter): averaged over its
+        draws, a design's mean under one model; over many such models, how sure that mean is."""
+        parameters = latent = None
+        if self.parameters is not None:
+            p = self.parameters
+            fixed = self._parameter_draws(1, rng)[0]
+            parameters = ParameterSpread(p.keys, fixed, np.zeros_like(p.covariance), p.lower,
+                                         p.upper)
+        if self.latent is not None:
+            lat = self.latent
+            day_sd = lat.day_sd
+            if math.isfinite(lat.day_dof):
+                day_sd = lat.day_sd * math.sqrt(lat.day_dof / rng.chisquare(lat.day_dof))
+            latent = replace(lat, mean=float(rng.normal(lat.mean, lat.mean_std_error)),
+                             mean_std_error=0.0, day_sd=float(day_sd), day_dof=math.inf)
+        discrepancy = tuple(replace(d, bias=float(rng.normal(d.bias, d.bias_std_error)),
+                                    bias_std_error=0.0) for d in self.discrepancy)
+        return replace(self, latent=latent, parameters=parameters, discrepancy=discrepancy)
+
+    def _parameter_draws(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        p = self.parameters
+        if not p.covariance.any():
+            return np.clip(np.tile(p.values, (n, 1)), p.lower, p.upper)
+        draws = rng.multivariate_normal(p.values, p.covariance, n, method='eigh')
+        return np.clip(draws, p.lower, p.upper)
+
+    def _latent_draws(self, n: int, rng: np.random.Generator,
+                      contact_angle_deg: float) -> np.ndarray:
+        lat = self.latent
+        lower, upper = lat.lower, lat.upper
+        if lat.key == 'geometry.latch_offset_deg':      # the latched arm within [0, 15] deg
+            lower = max(lower, -contact_angle_deg)
+            upper = min(upper, 15.0 - contact_angle_deg)
+        if not lower < upper:
+            raise ParameterError(f'{lat.key}: no value lies in [{lower:g}, {upper:g}] for a '
+                                 f'contact angle of {contact_angle_deg:g} degrees')
+        day_sd = lat.day_sd
+        if math.isfinite(lat.day_dof):
+            day_sd = lat.day_sd * np.sqrt(lat.day_dof / rng.chisquare(lat.day_dof, n))
+        out = (rng.normal(lat.mean, lat.mean_std_error, n) + rng.normal(0.0, 1.0, n) * day_sd
+               + rng.normal(0.0, lat.strike_sd, n))
+        return np.clip(out, lower, upper)
+
+    def to_mapping(self) -> dict:
+        """The scene file's `spread` section (from_mapping reads it back)."""
+        out: dict = {}
+        if self.latent is not None:
+            lat = self.latent
+            out['latent'] = {'key': lat.key, 'mean': _sig(lat.mean),
+                             'mean_std_error': _sig(lat.mean_std_error),
+                             'day_sd': _sig(lat.day_sd), 'strike_sd': _sig(lat.strike_sd),
+                             'range': [_sig(lat.lower), _sig(lat.upper)],
+                             'day_dof': _sig(lat.day_dof)}
+        if self.parameters is not None:
+            p = self.parameters
+            sd = np.sqrt(np.diag(p.covariance))
+            scale = np.where(sd > 0, sd, 1.0)
+            corr = p.covariance / np.outer(scale, scale)
+            np.fill_diagonal(corr, 1.0)
+            out['parameters'] = {
+                key: {'value': _sig(v), 'std_error': _sig(s), 'bounds': [_sig(lo), _sig(hi)]}
+                for key, v, s, lo, hi in zip(p.keys, p.values, sd, p.lower, p.upper)}
+            pairs = {a: {b: round(float(corr[i, j]), 4) for j, b in enumerate(p.keys)
+                         if j != i and corr[i, j] != 0} for i, a in enumerate(p.keys)}
+            out['correlation'] = {a: row for a, row in pairs.items() if row}
+        out['discrepancy'] = {d.metric: {'bias': _sig(d.bias),
+                                         'bias_std_error': _sig(d.bias_std_error),
+                                         'sd': _sig(d.sd)} for d in self.discrepancy}
+        out['climatology'] = {m: [_sig(v) for v in values]
+                              for m, values in self.climatology.items()}
+        out['provenance'] = self.provenance
+        return out
+
+    @classmethod
+    def from_mapping(cls, data, where: str) -> Spread:
+        """A scene file's `spread` section; a malformed one is named with ``where``."""
+        if not isinstance(data, dict):
+            raise ParameterError(f'{where}: spread must be a mapping, got {type(data).__name__}')
+        unknown = set(data) - {'latent', 'parameters', 'correlation', 'discrepancy',
+                               'climatology', 'provenance'}
+        if unknown:
+            raise ParameterError(f'{where}: spread: unknown key(s) {", ".join(sorted(unknown))}')
+        return cls(_latent(data.get('latent'), where), _parameters(data, where),
+                   _discrepancy(data.get('discrepancy') or {}, where),
+                   _climatology(data.get('climatology') or {}, where),
+                   dict(data.get('provenance') or {}))
+
+
+def _sig(value) -> float:
+    """A float to 6 significant digits: what a scene file needs, readably."""
+    return float(f'{float(value):.6g}')
+
+
+def _number(value, where: str, name: str, minimum: Optional[float] = None) -> float:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(f'{where}: spread: {name} = {value!r} is not a number') from None
+    if not math.isfinite(number) or (minimum is not None and number < minimum):
+        bound = '' if minimum is None else f' >= {minimum:g}'
+        raise ParameterError(f'{where}: spread: {name} = {value!r} must be a finite number{bound}')
+    return number
+
+
+def _latent(data, where: str) -> Optional[Latent]:
+    if data is None:
+        return None
+    if not isinstance(data, dict) or 'key' not in data:
+        raise ParameterError(f'{where}: spread: latent must be a mapping with key, mean, '
+                             f'mean_std_error, day_sd, strike_sd and range')
+    span = data.get('range', [-math.inf, math.inf])
+    if not (isinstance(span, (list, tuple)) and len(span) == 2):
+        raise ParameterError(f'{where}: spread: latent range = {span!r} is not [low, high]')
+    lower, upper = (float(v) for v in span)
+    dof = data.get('day_dof')
+    return Latent(str(data['key']), _number(data.get('mean'), where, 'latent mean'),
+                  _number(data.get('mean_std_error', 0.0), where, 'latent mean_std_error', 0.0),
+                  _number(data.get('day_sd'), where, 'latent day_sd', 0.0),
+                  _number(data.get('strike_sd'), where, 'latent strike_sd', 0.0), lower, upper,
+                  math.inf if dof is None or dof == math.inf
+                  else _number(dof, where, 'latent day_dof', 1.0))
+
+
+def _parameters(data: dict, where: str) -> Optional[ParameterSpread]:
+    params = data.get('parameters')
+    if not params:
+        return None
+    keys = tuple(params)
+    values = np.array([_number(params[k].get('value'), where, f'{k} value') for k in keys])
+    sd = np.array([_number(params[k].get('std_error'), where, f'{k} std_error', 0.0)
+                   for k in keys])
+    bounds = np.array([params[k].get('bounds', [-math.inf, math.inf]) for k in keys], float)
+    corr = np.eye(len(keys))
+    table = data.get('correlation') or {}
+    if not isinstance(table, dict):
+        raise ParameterError(f'{where}: spread: correlation must map a parameter to '
+                             f'{{other parameter: correlation}}')
+    for a, row in table.items():
+        for b, rho in (row or {}).items():
+            if a not in keys or b not in keys or a == b:
+                raise ParameterError(f'{where}: spread: correlation of {a} with {b}: both '
+                                     f'must be distinct parameters of the spread')
+            corr[keys.index(a), keys.index(b)] = _number(rho, where, f'correlation {a}, {b}')
+    if not np.allclose(corr, corr.T) or np.abs(corr).max() > 1.0:
+        raise ParameterError(f'{where}: spread: correlation must be symmetric, each within '
+                             f'[-1, 1]')
+    covariance = corr * np.outer(sd, sd)
+    if np.linalg.eigvalsh(covariance).min() < -1e-9 * max(float(sd.max()) ** 2, 1e-300):
+        raise ParameterError(f'{where}: spread: the parameters\' correlation is not positive '
+                             f'semi-definite')
+    return ParameterSpread(keys, values, covariance, bounds[:, 0], bounds[:, 1])
+
+
+def _discrepancy(data: dict, where: str) -> tuple:
+    out = []
+    for metric, entry in data.items():
+        if metric not in METRICS:
+            raise ParameterError(f'{where}: spread: discrepancy of {metric!r}: known metrics '
+                                 f'are {", ".join(METRICS)}')
+        out.append(Discrepancy(metric, _number(entry.get('bias', 0.0), where, 'bias'),
+                               _number(entry.get('bias_std_error', 0.0), where,
+                                       'bias_std_error', 0.0),
+                               _number(entry.get('sd'), where, f'{metric} sd', 0.0)))
+    return tuple(out)
+
+
+def _climatology(data: dict, where: str) -> dict:
+    out = {}
+    for metric, values in data.items():
+        if metric not in METRICS:
+            raise ParameterError(f'{where}: spread: climatology of {metric!r}: known metrics '
+                                 f'are {", ".join(METRICS)}')
+        out[metric] = tuple(_number(v, where, f'climatology {metric}') for v in values)
+    return out
+
+
+def quantiles(samples: np.ndarray) -> dict:
+    """{'q05': ..., ..., 'q95': ...} of the finite samples (NaN if none)."""
+    finite = np.asarray(samples, float)
+    finite = finite[np.isfinite(finite)]
+    if finite.size == 0:
+        return {quantile_label(q): math.nan for q in QUANTILE_LEVELS}
+    return {quantile_label(q): float(v)
+            for q, v in zip(QUANTILE_LEVELS, np.quantile(finite, QUANTILE_LEVELS))}
+
+
+def crps(samples: np.ndarray, observed: float) -> float:
+    """The continuous ranked probability score of an ensemble forecast for one observation
+    (in the observation's units; lower is better): E|X - y| - E|X - X'| / 2."""
+    x = np.sort(np.asarray(samples, float)[np.isfinite(samples)])
+    n = x.size
+    if n == 0 or not math.isfinite(observed):
+        return math.nan
+    # E|X - X'| from the sorted sample in O(n): sum_i (2i - n - 1) x_i * 2 / n^2
+    spread_term = float(np.sum((2 * np.arange(1, n + 1) - n - 1) * x)) * 2.0 / n ** 2
+    return float(np.mean(np.abs(x - observed))) - 0.5 * spread_term
+
+
+def pit(samples: np.ndarray, observed: float) -> float:
+    """Where the observation falls in the forecast: the fraction of the ensemble below it
+    (ties counted half)."""
+    x = np.asarray(samples, float)
+    x = x[np.isfinite(x)]
+    if x.size == 0 or not math.isfinite(observed):
+        return math.nan
+    return float((np.sum(x < observed) + 0.5 * np.sum(x == observed)) / x.size)
+
+
+__all__ = ['METRICS', 'QUANTILE_LEVELS', 'Discrepancy', 'Draws', 'Latent', 'ParameterSpread',
+           'Spread', 'crps', 'pit', 'quantile_label', 'quantiles']

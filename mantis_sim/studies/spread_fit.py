@@ -1,0 +1,273 @@
+"""The spread of each group's strikes, fitted to the training strikes (`mantis identify
+--spread`), written into each group's scene (mantis_sim.spread reads it).
+
+1. **Each strike's own latent.** The value of the latent key (where the arm sits on the latch)
+   that brings the strike's simulated tip speed and spring energy closest to its measured
+   ones, the scene otherwise held (Gauss-Newton, day_state.DayStateFit with each strike its
+   own unit).
+2. **Days and strikes.** A linear mixed model over those values (statsmodels MixedLM,
+   restricted maximum likelihood): a mean per group; a random intercept per recording day of
+   the group, the day's assembly; and the strikes' scatter within a day. The two variances
+   are shared by the groups (a group has two to eight days: too few for its own). REML, since
+   with so few days maximum likelihood would shrink the day variance by about 1/days. A
+   strike's latent is an estimate: its own uncertainty is left inside the within-day scatter,
+   which makes the spread wider, not narrower.
+3. **The discrepancy.** At its own latent each strike still misses in tip speed and in spring
+   energy (one key cannot match both): measured / simulated - 1. A mixed model of the same
+   form gives its mean (the bias, with its standard error) and its scatter between days and
+   within them, which a new strike's discrepancy has both of. One for all groups: with two to
+   eight days a group's own mean is mostly its days' noise (left out a day at a time, such
+   means made the forecasts worse).
+4. **The identified parameters.** Their standard errors and correlations from the scene's
+   provenance (`mantis identify`), for the keys that apply to the group.
+
+The spread is fitted to all the training strikes of a group at once, never to one strike.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from datetime import UTC, datetime
+import math
+import warnings
+
+import numpy as np
+
+from mantis_sim.scene import Scene
+from mantis_sim.spread import Discrepancy, Latent, ParameterSpread, Spread
+
+from .day_state import DayStateFit
+from .fidelity import LATCH_KEY, SimulatedStrike
+from .identify import FreeParameter, Weights, parse_free_parameter, simulate_task, split_label
+from .strikes import RealStrike
+
+DEFAULT_LATENT = f'{LATCH_KEY}=-5:12'
+# the latent answers to the lab's two values of a strike; the peak body and arm speeds and the
+# recorded motion are the identification's business
+LATENT_WEIGHTS = Weights(tip_speed=1.0, spring_energy=1.0, body_speed=0.0, arm_speed=0.0,
+                         series=0.0)
+MEASURED = {'peak_tip_speed_mps': 'peak_tip_speed_mps', 'spring_energy_mJ': 'spring_energy_mJ'}
+
+
+@dataclass(frozen=True)
+class StrikeLatent:
+    strike: RealStrike
+    value: float
+    std_error: float
+    at_bound: bool
+    simulated: SimulatedStrike          # the strike at its own latent
+
+    def correction(self, metric: str) -> float:
+        """measured / simulated - 1 at the strike's own latent: the discrepancy's sample."""
+        measured = getattr(self.strike, MEASURED[metric])
+        predicted = getattr(self.simulated, metric)
+        if measured is None or not (math.isfinite(predicted) and predicted > 0):
+            return math.nan
+        return measured / predicted - 1.0
+
+
+@dataclass(frozen=True)
+class LatentModel:
+    """The mixed model's estimates (units of the latent key)."""
+    key: str
+    means: dict                 # group -> (mean, standard error)
+    day_sd: float
+    day_sd_std_error: float
+    strike_sd: float
+    strike_sd_std_error: float
+    days: int
+    strikes: int
+
+    @property
+    def day_dof(self) -> int:
+        """The day variance's degrees of freedom: days less the group means."""
+        return max(self.days - len(self.means), 1)
+
+
+def strike_latents(scenes: dict[str, Scene], strikes: Sequence[RealStrike],
+                   param: FreeParameter, mapper: Callable, iterations: int = 8,
+                   log: Callable[[str], None] = lambda _: None) -> list[StrikeLatent]:
+    """Each strike's own value of ``param`` (module docstring, 1), and the strike there."""
+    own = [replace(s, recording_day=s.trial) for s in strikes]     # each strike its own unit
+    fit = DayStateFit(scenes, own, param, LATENT_WEIGHTS, mapper)
+    states = {state.day: state for state in fit.fit(iterations, log=log)}
+    fitted = [s for s in strikes if s.trial in states]
+    sims = mapper(simulate_task, [(scenes[s.group], s, False,
+                                   {param.key: states[s.trial].value}) for s in fitted])
+    return [StrikeLatent(s, states[s.trial].value, states[s.trial].std_error,
+                         states[s.trial].at_bound, sim) for s, sim in zip(fitted, sims)]
+
+
+def latent_model(latents: Sequence[StrikeLatent], key: str) -> LatentModel:
+    """The mixed model of module docstring, 2, over the strikes that struck."""
+    used = [x for x in latents if x.simulated.status == 'strike']
+    groups = sorted({x.strike.group for x in used})
+    if len(used) < 3 or len({(x.strike.group, x.strike.recording_day) for x in used}) < 2:
+        raise ValueError(f'the spread needs strikes of at least two recording days; got '
+                         f'{len(used)} strikes')
+    y = np.array([x.value for x in used])
+    exog = np.array([[x.strike.group == g for g in groups] for x in used], dtype=float)
+    units = [f'{x.strike.group}#{x.strike.recording_day}' for x in used]
+    result = _mixed_model(y, exog, units)
+    day_var = float(result.cov_re[0, 0])
+    day_var_se = float(np.asarray(result.bse_re).ravel()[0])
+    strike_var = float(result.scale)
+    days = len(set(units))
+    # the within-day variance's standard error: as for a sample variance on the degrees of
+    # freedom left within days (statsmodels reports none for the scale)
+    within_dof = max(len(used) - days, 1)
+    strike_sd = math.sqrt(strike_var)
+    day_sd = math.sqrt(max(day_var, 0.0))
+    return LatentModel(
+        key, {g: (float(m), float(se)) for g, m, se in zip(groups, result.fe_params,
+                                                           result.bse_fe)},
+        day_sd, _sd_std_error(day_sd, day_var_se), strike_sd,
+        strike_sd / math.sqrt(2.0 * within_dof), days, len(used))
+
+
+def _mixed_model(y: np.ndarray, exog: np.ndarray, units: list):
+    """statsmodels' MixedLM of y on exog with a random intercept per unit, fitted by REML.
+    (statsmodels, a slow import, is loaded here, not by every `mantis` command.) Where the
+    days agree within their strikes' scatter the day variance ends at zero, and statsmodels
+    warns on its way there: an answer here, not a failure; a result that is not finite is."""
+    from statsmodels.regression.mixed_linear_model import MixedLM
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore')     # ConvergenceWarning, SingularMatrixWarning, ...
+        result = MixedLM(y, exog, groups=units).fit(reml=True)
+    estimates = np.concatenate([np.ravel(result.fe_params), np.ravel(result.bse_fe),
+                                np.ravel(result.cov_re), [result.scale]])
+    if not np.isfinite(estimates).all():
+        raise ValueError(f'the mixed model over {len(y)} strikes of {len(set(units))} days did '
+                         f'not converge to finite estimates')
+    return result
+
+
+def _sd_std_error(sd: float, variance_std_error: float) -> float:
+    """The standard error of a standard deviation from its variance's (delta method)."""
+    if sd > 0:
+        return variance_std_error / (2.0 * sd)
+    return math.sqrt(max(variance_std_error, 0.0))
+
+
+def discrepancies(latents: Sequence[StrikeLatent]) -> tuple:
+    """The Discrepancy of each metric (module docstring, 3), the same for every group."""
+    used = [x for x in latents if x.simulated.status == 'strike']
+    out = []
+    for metric in MEASURED:
+        rows = [(x.correction(metric), f'{x.strike.group}#{x.strike.recording_day}')
+                for x in used]
+        rows = [(c, unit) for c, unit in rows if math.isfinite(c)]
+        y = np.array([c for c, _ in rows])
+        if y.size and np.ptp(y) == 0:       # the physics matches every strike alike
+            out.append(Discrepancy(metric, float(y[0]), 0.0, 0.0))
+            continue
+        result = _mixed_model(y, np.ones((y.size, 1)), [u for _, u in rows])
+        day_var = max(float(result.cov_re[0, 0]), 0.0)
+        out.append(Discrepancy(metric, float(result.fe_params[0]), float(result.bse_fe[0]),
+                               math.sqrt(day_var + float(result.scale))))
+    return tuple(out)
+
+
+def parameter_spread(scene: Scene, group: str) -> ParameterSpread | None:
+    """The identified parameters that apply to ``group``, from the scene's provenance: values,
+    standard errors, bounds and correlations (pairs the provenance does not correlate, e.g.
+    of different stages, are taken as independent)."""
+    prov = scene.provenance or {}
+    entries = {}
+    for label, entry in (prov.get('parameters') or {}).items():
+        key, groups = split_label(label)
+        if groups is None or group in groups:
+            entries[key] = (label, entry)
+    if not entries:
+        return None
+    keys = tuple(entries)
+    values = np.array([float(entries[k][1]['value']) for k in keys])
+    sd = np.array([float(entries[k][1]['std_error']) for k in keys])
+    bounds = np.array([entries[k][1].get('bounds', [-math.inf, math.inf]) for k in keys], float)
+    corr = np.eye(len(keys))
+    table = prov.get('correlation') or {}
+    for i, a in enumerate(keys):
+        for j, b in enumerate(keys):
+            rho = (table.get(entries[a][0]) or {}).get(entries[b][0])
+            if i != j and rho is not None:
+                corr[i, j] = float(rho)
+    corr = _nearest_correlation(0.5 * (corr + corr.T))
+    return ParameterSpread(keys, values, corr * np.outer(sd, sd), bounds[:, 0], bounds[:, 1])
+
+
+def _nearest_correlation(corr: np.ndarray) -> np.ndarray:
+    """Rounded correlations can leave a matrix slightly indefinite: clip its eigenvalues."""
+    w, v = np.linalg.eigh(corr)
+    if w.min() >= 0:
+        return corr
+    fixed = (v * np.clip(w, 1e-9, None)) @ v.T
+    d = np.sqrt(np.diag(fixed))
+    return fixed / np.outer(d, d)
+
+
+def climatology(strikes: Sequence[RealStrike], group: str) -> dict:
+    """The group's measured values: the forecast that quotes the lab's past strikes."""
+    out = {}
+    for metric, attribute in MEASURED.items():
+        out[metric] = tuple(float(getattr(s, attribute)) for s in strikes
+                            if s.group == group and getattr(s, attribute) is not None)
+    return out
+
+
+def fit_spreads(scenes: dict[str, Scene], strikes: Sequence[RealStrike], mapper: Callable,
+                latent: str = DEFAULT_LATENT, iterations: int = 8, sources: Sequence[str] = (),
+                log: Callable[[str], None] = lambda _: None) -> tuple[dict, list, LatentModel]:
+    """group -> Spread for every group among the strikes, with the strikes' own latents and
+    the mixed model they gave."""
+    param = latent_parameter(scenes, latent)
+    log(f'spread: each strike\'s own {param.key} ({len(strikes)} strikes)')
+    latents = strike_latents(scenes, strikes, param, mapper, iterations, log)
+    spreads, model = spreads_from(latents, scenes, param, sources)
+    return spreads, latents, model
+
+
+def latent_parameter(scenes: dict[str, Scene], latent: str = DEFAULT_LATENT) -> FreeParameter:
+    """'key=LO:HI' -> the latent's FreeParameter (its bounds are the draws' range)."""
+    return parse_free_parameter(latent, scenes, option='--spread-latent')
+
+
+def spreads_from(latents: Sequence[StrikeLatent], scenes: dict[str, Scene],
+                 param: FreeParameter, sources: Sequence[str] = ()) -> tuple[dict, LatentModel]:
+    """group -> Spread from the strikes' own latents (module docstring, 2-4): the scenes'
+    groups each need struck strikes among them."""
+    model = latent_model(latents, param.key)
+    errors = discrepancies(latents)
+    missing = sorted(set(scenes) - set(model.means))
+    if missing:
+        raise ValueError(f'no strike of {", ".join(missing)} struck at its own latent: no '
+                         f'spread for it')
+    strikes = [x.strike for x in latents]
+    provenance = {
+        'fitted_by': 'mantis identify --spread',
+        'date': datetime.now(UTC).isoformat(timespec='seconds'),
+        'strikes': model.strikes, 'recording_days': model.days,
+        'sources': list(sources),
+        'method': 'each strike\'s own latent (Gauss-Newton on its tip speed and spring energy); '
+                  'a linear mixed model over them (statsmodels MixedLM, REML: a mean per '
+                  'group, a random intercept per recording day, the scatter within days); '
+                  'the relative discrepancy at each strike\'s own latent',
+        'latent_std_errors': {'day_sd': model.day_sd_std_error,
+                              'strike_sd': model.strike_sd_std_error},
+        'at_bound': sorted(x.strike.trial for x in latents if x.at_bound),
+        'not_struck': sorted(x.strike.trial for x in latents
+                             if x.simulated.status != 'strike'),
+    }
+    spreads = {}
+    for group, scene in scenes.items():
+        mean, mean_se = model.means[group]
+        spreads[group] = Spread(
+            Latent(param.key, mean, mean_se, model.day_sd, model.strike_sd, param.lower,
+                   param.upper, model.day_dof),
+            parameter_spread(scene, group), errors, climatology(strikes, group),
+            {**provenance, 'group_strikes': sum(s.group == group for s in strikes)})
+    return spreads, model
+
+
+__all__ = ['DEFAULT_LATENT', 'LatentModel', 'StrikeLatent', 'climatology', 'discrepancies',
+           'fit_spreads', 'latent_model', 'latent_parameter', 'parameter_spread', 'spreads_from',
+           'strike_latents']

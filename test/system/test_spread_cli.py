@@ -1,0 +1,112 @@
+"""The spread from the command line: `mantis identify --spread` fits it into the scenes,
+`mantis compare --spread N` forecasts real strikes from it and scores the forecasts, `mantis sim
+--spread N` gives a design's quantiles; each seeded, each refusing what it cannot do."""
+import csv
+import json
+
+from conftest import data_file
+import numpy as np
+import pytest
+
+from mantis_rig.cli import main as mantis
+from mantis_sim.scene import load_scene, load_scene_file
+from mantis_sim.studies.forecast import DESIGN_METRICS
+
+TABLE = 'real_trials/authors_summary_train.csv'
+LEVELS = [f'q{5 * k:02d}' for k in range(1, 20)]
+
+
+def compare(out, *extra):
+    return mantis(['compare', '--strikes', str(data_file(TABLE)), '--out', str(out),
+                   '--workers', '0', '--group', 'water_23mm', *extra])
+
+
+def test_compare_forecasts_each_strike_with_its_quantiles_and_scores_them(tmp_path, capsys):
+    assert compare(tmp_path / 'a', '--spread', '8', '--seed', '3', '--json') == 0
+    report = json.loads(capsys.readouterr().out)
+    with open(tmp_path / 'a' / 'predictions.csv') as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == 6 and {r['group'] for r in rows} == {'water_23mm'}
+    columns = ['trial', 'group']
+    for stem in ('tip_speed_mps', 'spring_energy_mJ'):
+        columns += [f'{stem}_measured'] + [f'{stem}_{q}' for q in LEVELS]
+    assert list(rows[0]) == columns + ['robots_not_struck']
+    for row in rows:
+        q = [float(row[f'tip_speed_mps_{level}']) for level in LEVELS]
+        assert q == sorted(q) and 3.5 < q[9] < 6.0          # a strike in water: ~4.6 m/s
+    scores = report['spread']['scores']
+    for metric in ('peak_tip_speed_mps', 'spring_energy_mJ'):
+        entry = scores[metric]['water_23mm']
+        assert entry['strikes'] == 6 and 0.0 <= entry['coverage_50'] <= entry['coverage_80']
+        assert entry['crps'] > 0 and entry['crps_climatology'] > 0
+    with open(tmp_path / 'a' / 'spread_scores.csv') as handle:
+        assert {(r['metric'], r['group']) for r in csv.DictReader(handle)} == {
+            (m, g) for m in ('peak_tip_speed_mps', 'spring_energy_mJ')
+            for g in ('water_23mm', 'all')}
+    assert (tmp_path / 'a' / 'forecasts.png').stat().st_size > 10_000
+    # the seed fixes every robot: again, the same table; another seed, another
+    assert compare(tmp_path / 'b', '--spread', '8', '--seed', '3', '--json') == 0
+    assert compare(tmp_path / 'c', '--spread', '8', '--seed', '4', '--json') == 0
+    capsys.readouterr()
+    text = {k: (tmp_path / k / 'predictions.csv').read_text() for k in 'abc'}
+    assert text['a'] == text['b'] != text['c']
+
+
+@pytest.mark.parametrize('extra, message', [
+    (['--spread', '1'], 'at least 2 robots'),
+    (['--spread', '5', '--at-seat'], 'use one or the other'),
+    (['--spread', '5', '--scene', 'water_23mm=reference_water_23mm'],
+     'no spread in the scene of water_23mm'),
+])
+def test_compare_refuses_a_spread_it_cannot_draw(tmp_path, capsys, extra, message):
+    assert compare(tmp_path / 'o', *extra) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / 'o').exists()
+
+
+def test_sim_gives_every_metric_s_quantiles_for_the_seed(capsys):
+    args = ['sim', '--scene', 'air_23mm', '--set', 'geometry.d_t_mm=21', '--spread', '12',
+            '--json']
+    assert mantis(args + ['--seed', '5']) == 0
+    first = json.loads(capsys.readouterr().out)
+    assert first['robots'] == 12 and first['not_struck'] == 0
+    assert set(first['quantiles']) == set(DESIGN_METRICS)
+    for metric, table in first['quantiles'].items():
+        values = [table[level] for level in LEVELS]
+        assert values == sorted(values) and np.isfinite(values).all(), metric
+    assert mantis(args + ['--seed', '5']) == 0
+    assert json.loads(capsys.readouterr().out) == first
+    assert mantis(['sim', '--scene', 'air_23mm', '--spread', '12']) == 0
+    text = capsys.readouterr().out
+    assert '12 robots drawn from its spread (seed 1)' in text
+    assert sum(line.startswith(tuple(LEVELS)) for line in text.splitlines()) == 19
+
+
+@pytest.mark.parametrize('args, message', [
+    (['--scene', 'reference_air_23mm', '--spread', '5'], 'has no spread'),
+    (['--scene', 'air_23mm', '--spread', '0'], 'at least 2 robots'),
+    (['--scene', 'air_23mm', '--spread', '5', '--plot', 'x.png'], 'for one simulation'),
+])
+def test_sim_refuses_a_spread_it_cannot_draw(capsys, args, message):
+    assert mantis(['sim', *args]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_identify_fits_the_spread_into_the_scene_and_compare_draws_from_it(tmp_path, capsys):
+    out = tmp_path / 'scenes'
+    code = mantis(['identify', '--strikes', str(data_file(TABLE)), '--group', 'water_23mm',
+                   '--spread', '--out', str(out), '--workers', '0', '--json'])
+    assert code == 0
+    report = json.loads(capsys.readouterr().out)['spread']
+    assert report['strikes'] == 6 and report['days'] == 2
+    assert len(report['strike_latents']) == 6
+    scene = load_scene_file(out / 'water_23mm.yaml')
+    assert scene.spread.latent.mean == pytest.approx(report['means']['water_23mm']['value'],
+                                                     rel=1e-5)
+    assert scene.spread.provenance['strikes'] == 6
+    assert len(scene.spread.climatology['spring_energy_mJ']) == 6
+    # the parameters were kept: the scene's robot is the shipped one
+    shipped = load_scene('water_23mm')
+    assert scene.tendon == shipped.tendon and scene.hinge == shipped.hinge
+    assert compare(tmp_path / 'cmp', '--spread', '4', '--scene',
+                   f'water_23mm={out / "water_23mm.yaml"}') == 0
