@@ -754,6 +754,13 @@ The standard errors here are the 32 training strikes'. Over all 55 strikes with 
 (issue 24) the real effects are {against_all}.
 How many standard errors from zero the training strikes put each real effect: {identifiable}.
 
+## The spread
+Each prediction with its interval: the shipped scenes' spread (where the arm sits, by day and by
+strike; the identified parameters' uncertainty; the discrepancy; [spread.md](spread.md)),
+judged with each recording day left out, the design effects with their intervals, and the
+spread's own parameters with their standard errors: [spread_benchmark.md](spread_benchmark.md)
+(`bench/bench_spread.py`).
+
 ## Strikes the model did not simulate to a strike
 {not_struck}
 

@@ -7,7 +7,10 @@ row holds every input, the metrics of `mantis sim --json` (nested ones flattened
 as `mantis sim` reports it) and the whole design's (``design_time_s``: the scene, the
 simulation and its metrics), and a status:
 ``ok``, ``no strike`` (the pull never released the arm) or ``failed`` (the simulation raised),
-with the reason. Nothing here knows where the designs run (mantis_sim.studies.sweep does).
+with the reason. With a spread (``spread_robots`` N > 0), the row also holds the quantiles
+q05..q95 of SPREAD_METRICS over N robots drawn from the scene's spread at the design
+(``peak_tip_speed_mps_q05``, ...), the same draws for every design of a seed (mantis_sim.robots).
+Nothing here knows where the designs run (mantis_sim.studies.sweep does).
 """
 from __future__ import annotations
 
@@ -26,12 +29,18 @@ from .errors import InputError
 from .model import SimulationError
 from .parameters import ParameterError
 from .results import JSON_KEYS, simulate
+from .robots import design_spread
 from .scene import Scene, load_scene
+from .spread import quantiles
 
 STATUS_OK, STATUS_NO_STRIKE, STATUS_FAILED = 'ok', 'no strike', 'failed'
 ID_COLUMN = 'design_id'
 METRIC_KEYS = tuple(k for k in JSON_KEYS if k not in ('effects', 'solver', 'rtol',
                                                       'wall_time_s', 'status', 'reason'))
+#: The metrics a sweep with a spread gives the quantiles of (mantis_sim.robots.DESIGN_METRICS).
+SPREAD_METRICS = ('peak_tip_speed_mps', 'spring_energy_mJ', 'max_spring_energy_mJ',
+                  'peak_tendon_force_N')
+SPREAD_ROBOTS_COLUMN = 'spread_robots'
 EXTRA_METRICS = ('peak_time_s', 'peak_arm_speed_radps', 'peak_body_speed_in_strike_radps',
                  'arm_kinetic_energy_share_at_peak', 'tendon_work_phase_IV_mJ')
 
@@ -128,8 +137,27 @@ def design_id(values: dict) -> str:
     return hashlib.sha1(text.encode()).hexdigest()[:16]
 
 
-def run_design(scene: Scene, values: dict) -> dict:
+def run_design(scene: Scene, values: dict, spread_robots: int = 0,
+               spread_seed: int = 1) -> dict:
     """The row of one design (module docstring). Never raises for a design that fails."""
+    row = _run_nominal(scene, values)
+    if spread_robots and row['status'] != STATUS_FAILED:
+        started = time.perf_counter()
+        row.update(spread_columns(scene.with_values(values), spread_robots, spread_seed))
+        row['design_time_s'] += time.perf_counter() - started
+    return row
+
+
+def spread_columns(design: Scene, robots: int, seed: int) -> dict:
+    """The quantiles of SPREAD_METRICS over the design's drawn robots, as row columns."""
+    run = design_spread(design, robots, seed, lambda f, items: [f(item) for item in items])
+    out = {SPREAD_ROBOTS_COLUMN: robots, 'spread_seed': seed, 'spread_not_struck': run.not_struck}
+    for metric in SPREAD_METRICS:
+        out.update({f'{metric}_{q}': v for q, v in quantiles(run.samples[metric]).items()})
+    return out
+
+
+def _run_nominal(scene: Scene, values: dict) -> dict:
     row = {ID_COLUMN: design_id(values), **values}
     started = time.perf_counter()
     try:
@@ -151,12 +179,13 @@ def run_design(scene: Scene, values: dict) -> dict:
     return row
 
 
-def run_chunk(scene_name: str, overrides: list, chunk: list[dict]) -> list[dict]:
+def run_chunk(scene_name: str, overrides: list, chunk: list[dict], spread_robots: int = 0,
+              spread_seed: int = 1) -> list[dict]:
     """Rows of several designs of one scene: what a worker runs (the scene loaded once, BLAS
     on one thread as on any worker: mantis_sim.blas)."""
     one_blas_thread()
     scene = _loaded(scene_name, tuple(overrides))
-    return [run_design(scene, values) for values in chunk]
+    return [run_design(scene, values, spread_robots, spread_seed) for values in chunk]
 
 
 @functools.lru_cache(maxsize=8)
@@ -177,5 +206,6 @@ def _flatten(metrics: dict) -> dict:
 
 
 __all__ = ['DesignError', 'Range', 'check_ranges', 'design_id', 'grid', 'latin_hypercube',
-           'parse_range', 'run_chunk', 'run_design', 'ID_COLUMN', 'STATUS_OK',
+           'parse_range', 'run_chunk', 'run_design', 'spread_columns', 'ID_COLUMN',
+           'SPREAD_METRICS', 'SPREAD_ROBOTS_COLUMN', 'STATUS_OK',
            'STATUS_NO_STRIKE', 'STATUS_FAILED']

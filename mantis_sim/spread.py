@@ -32,6 +32,9 @@ from .parameters import ParameterError
 
 #: The metrics a discrepancy and a climatology are kept for, as a strike report names them.
 METRICS = ('peak_tip_speed_mps', 'spring_energy_mJ')
+#: Robots a spread draws by default: the fewest whose quantiles move by under 5 % of the 80 %
+#: interval's width from seed to seed (docs/spread_benchmark.md, "What N costs").
+DEFAULT_ROBOTS = 400
 #: The quantile levels reported for a spread: q05, q10, ... q95.
 QUANTILE_LEVELS = tuple(round(0.05 * k, 2) for k in range(1, 20))
 
@@ -320,5 +323,5 @@ def pit(samples: np.ndarray, observed: float) -> float:
     return float((np.sum(x < observed) + 0.5 * np.sum(x == observed)) / x.size)
 
 
-__all__ = ['METRICS', 'QUANTILE_LEVELS', 'Discrepancy', 'Draws', 'Latent', 'ParameterSpread',
-           'Spread', 'crps', 'pit', 'quantile_label', 'quantiles']
+__all__ = ['DEFAULT_ROBOTS', 'METRICS', 'QUANTILE_LEVELS', 'Discrepancy', 'Draws', 'Latent',
+           'ParameterSpread', 'Spread', 'crps', 'pit', 'quantile_label', 'quantiles']

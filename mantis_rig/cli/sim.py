@@ -9,13 +9,11 @@ from mantis_sim.errors import InputError
 from mantis_sim.parameters import SECTIONS, describe
 from mantis_sim.results import WARNINGS, simulate
 from mantis_sim.scene import EFFECTS, available_scenes, load_scene
+from mantis_sim.spread import DEFAULT_ROBOTS
 from mantis_sim.studies import strike_report
 
 from ..contract import FORCE_CEILING
 from .options import json_safe
-
-#: Robots drawn by `mantis sim --spread` without N (docs/spread_benchmark.md: what N costs).
-DEFAULT_ROBOTS = 200
 
 
 def add_commands(commands) -> None:
@@ -98,7 +96,7 @@ def run_sim(args) -> int:
 
 
 def _run_spread(args, scene) -> int:
-    from mantis_sim.studies import forecast
+    from mantis_sim import robots
     from mantis_sim.studies.parallel import ClusterMap
     if args.spread < 2:
         raise InputError(f'--spread {args.spread}: a spread needs at least 2 robots')
@@ -108,7 +106,7 @@ def _run_spread(args, scene) -> int:
         raise InputError(f'--spread: scene {scene.name} has no spread; fit one with `mantis '
                          f'identify --spread` (docs/spread.md)')
     with ClusterMap(workers=0, progress=not args.json, unit='robots') as mapper:
-        run = forecast.design_spread(scene, args.spread, args.seed, mapper)
+        run = robots.design_spread(scene, args.spread, args.seed, mapper)
     table = run.quantiles()
     if args.json:
         print(json.dumps(json_safe({'scene': scene.name, 'robots': run.robots,
@@ -121,7 +119,7 @@ def _run_spread(args, scene) -> int:
 
 
 def _spread_table(name: str, run, table: dict, seed: int) -> str:
-    from mantis_sim.studies.forecast import DESIGN_METRICS
+    from mantis_sim.robots import DESIGN_METRICS
     lines = [f'{name}: {run.robots} robots drawn from its spread (seed {seed}); '
              f'{run.robots - run.not_struck} struck']
     metrics = list(DESIGN_METRICS)

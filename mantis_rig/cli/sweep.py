@@ -31,6 +31,12 @@ def add_commands(commands) -> None:
     sweep.add_argument('--rtol', type=float, help='relative tolerance (instead of --accuracy)')
     sweep.add_argument('--out', type=Path, required=True, help='results table (.parquet)')
     add_cluster_options(sweep)
+    sweep.add_argument('--spread', type=int, default=0, metavar='N',
+                       help='also draw N robots of each design from the scene\'s spread and '
+                            'add the quantiles q05..q95 of tip speed, spring energy and tendon '
+                            'force as columns (docs/spread.md); the same robots for every design')
+    sweep.add_argument('--spread-seed', type=int, default=1,
+                       help='seed of the robots drawn by --spread (default 1)')
     sweep.add_argument('--chunk-size', type=int, help='designs per task (default: by cost)')
     sweep.add_argument('--quiet', action='store_true', help='no progress bar')
     sweep.set_defaults(run=run_sweep_command)
@@ -71,6 +77,11 @@ def run_sweep_command(args) -> int:
     ranges = [parse_range(text, need_n=args.sample is None) for text in args.vary]
     overrides = list(args.overrides)
     base = load_scene(args.scene, overrides)          # unknown scene or bad --set: refused
+    if args.spread and (args.spread < 2 or base.spread is None):
+        raise SweepError(f'--spread {args.spread}: needs at least 2 robots and a scene with a '
+                         f'spread' + ('' if base.spread is not None else
+                                      f' ({base.name} has none; `mantis identify --spread` '
+                                      f'fits one, docs/spread.md)'))
     check_ranges(base, ranges)
     estimate_s = 0.01
     designs = (latin_hypercube(ranges, args.sample, args.seed) if args.sample is not None
@@ -88,7 +99,8 @@ def run_sweep_command(args) -> int:
         load_scene(args.scene, overrides)             # a bad solver or tolerance: refused
     summary = run_sweep(args.scene, overrides, designs, args.out, scheduler=args.scheduler,
                         workers=args.workers, chunk_size=args.chunk_size,
-                        estimated_strike_s=estimate_s, progress=not args.quiet)
+                        estimated_strike_s=estimate_s, progress=not args.quiet,
+                        spread_robots=args.spread, spread_seed=args.spread_seed)
     print(summary, file=sys.stderr)
     print(f'mantis sweep: table {args.out}', file=sys.stderr)
     return 0
@@ -106,4 +118,23 @@ def run_sweep_plot(args) -> int:
                          top=args.top)
     for path in written:
         print(path)
+        if path.name == 'spread_effects.csv':
+            print(_spread_effects_text(path))
     return 0
+
+
+def _spread_effects_text(path: Path) -> str:
+    import csv
+    lines = []
+    with open(path, encoding='utf-8') as handle:
+        for e in csv.DictReader(handle):
+            change, sd = float(e['change_of_median']), float(e['one_strike_sd'])
+            verdict = ('exceeds' if e['exceeds_one_strike_scatter'] == 'True'
+                       else 'is within')
+            needed = float(e['strikes_per_design_to_see_it'])
+            lines.append(f'  {e["key"]} {float(e["low"]):g} to {float(e["high"]):g}: the median '
+                         f'{e["metric"]} changes by {change:+.3g}, which {verdict} one strike\'s '
+                         f'scatter (sd {sd:.3g}); a lab sees it with '
+                         + ('no number of strikes' if needed == float('inf')
+                            else f'{needed:.0f} strikes per design') + ' (80 % power, 5 % level)')
+    return '\n'.join(lines)

@@ -5,6 +5,11 @@
 - ``pareto.png``: peak tip speed against peak tendon force and against stored spring energy,
   the Pareto front (the fastest strike for no more force, or for no more energy) marked.
 - ``best_designs.csv``: the fastest designs whose peak tendon force stays under the limit.
+- with a spread (`mantis sweep --spread N`): ``intervals_<metric>.png``, the metric's median
+  and its 50 % and 80 % intervals over each varied key; ``spread_effects.csv``, for each varied
+  key the change of the median across its range, whether that change exceeds one strike's
+  scatter, and the strikes per design a lab needs to see it (80 % power, 5 % level; the two
+  ends of the range).
 """
 from __future__ import annotations
 
@@ -68,7 +73,81 @@ def plot_sweep(rows: list[dict], out_dir: Path, metric: str = SPEED,
         written.append(_heatmap(plt, rows, keys[0], keys[1], metric, out_dir))
     written.append(_pareto(plt, ok, out_dir))
     written.append(_best_table(rows, keys, force_limit_n, top, out_dir))
+    if f'{metric}_q50' in ok[0] and keys:
+        written.append(_intervals(plt, ok, keys, metric, out_dir))
+        written.append(_spread_effects_table(spread_effects(ok, keys, metric), out_dir))
     return written
+
+
+Z_80 = 1.2815516      # the 90 % quantile of the standard normal: q90 - q10 = 2 Z_80 sd
+
+
+def spread_effects(ok: list[dict], keys: list[str], metric: str) -> list[dict]:
+    """For each varied key: the change of the metric's median over the key's range (least
+    squares of q50 on all varied keys at once), one strike's scatter (the mean (q90 - q10) /
+    2.563, as for a normal), and the strikes per design to see the change."""
+    from .fidelity import fit_slopes
+    from .spread_effects import strikes_needed
+    medians = np.array([r[f'{metric}_q50'] for r in ok], float)
+    slopes = fit_slopes([np.array([r[k] for r in ok], float) for k in keys], medians)
+    sd = float(np.nanmean([(r[f'{metric}_q90'] - r[f'{metric}_q10']) / (2 * Z_80)
+                           for r in ok]))
+    out = []
+    for key, slope in zip(keys, slopes):
+        span = max(r[key] for r in ok) - min(r[key] for r in ok)
+        change = slope.value * span
+        out.append({'key': key, 'metric': metric, 'low': min(r[key] for r in ok),
+                    'high': max(r[key] for r in ok), 'change_of_median': change,
+                    'one_strike_sd': sd,
+                    'exceeds_one_strike_scatter': bool(abs(change) > sd),
+                    'strikes_per_design_to_see_it': strikes_needed(change, sd)})
+    return out
+
+
+def _spread_effects_table(effects: list[dict], out_dir: Path) -> Path:
+    path = out_dir / 'spread_effects.csv'
+    with open(path, 'w', newline='', encoding='utf-8') as f:
+        writer = csv.DictWriter(f, list(effects[0]))
+        writer.writeheader()
+        writer.writerows(effects)
+    return path
+
+
+def _intervals(plt, ok, keys, metric, out_dir) -> Path:
+    fig, axes = plt.subplots(1, len(keys), figsize=(4.5 * len(keys), 3.8), squeeze=False)
+    for ax, key in zip(axes[0], keys):
+        xs = sorted({r[key] for r in ok})
+        mean = {q: np.array([np.nanmean([r[f'{metric}_{q}'] for r in ok if r[key] == x])
+                             for x in xs]) for q in ('q10', 'q25', 'q50', 'q75', 'q90')}
+        ax.fill_between(xs, mean['q10'], mean['q90'], color='C0', alpha=0.2,
+                        label='80 % of strikes')
+        ax.fill_between(xs, mean['q25'], mean['q75'], color='C0', alpha=0.4,
+                        label='50 % of strikes')
+        ax.plot(xs, mean['q50'], 'o-', color='C0', ms=3, label='median')
+        ax.set_xlabel(_label(key))
+        ax.set_ylabel(_label(metric))
+        ax.legend(fontsize=8)
+    fig.suptitle('where strikes of each design fall (the other varied keys averaged)',
+                 fontsize=10)
+    path = out_dir / f'intervals_{metric}.png'
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+#: Axis labels in words, with units, for the keys a sweep usually varies and its metrics.
+LABELS = {'geometry.d_t_mm': 'guide distance (mm)',
+          'geometry.contact_angle_deg': 'contact angle (degrees)',
+          'drive.pull_speed_mm_per_s': 'pull speed (mm/s)',
+          'peak_tip_speed_mps': 'peak tip speed (m/s)',
+          'spring_energy_mJ': 'spring energy, the lab\'s (mJ)',
+          'max_spring_energy_mJ': 'most spring energy (mJ)',
+          'peak_tendon_force_N': 'peak tendon force (N)'}
+
+
+def _label(key: str) -> str:
+    return LABELS.get(key, key)
 
 
 def _heatmap(plt, rows, kx, ky, metric, out_dir) -> Path:

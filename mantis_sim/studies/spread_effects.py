@@ -24,9 +24,8 @@ import math
 
 import numpy as np
 
+from mantis_sim.robots import scene_spread, simulate_robot
 from mantis_sim.scene import Scene
-
-from .forecast import scene_spread, simulate_robot
 
 Z_TWO_SIDED_5_PERCENT = 1.959964
 Z_POWER_80_PERCENT = 0.841621

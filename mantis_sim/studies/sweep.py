@@ -17,7 +17,7 @@ import os
 from pathlib import Path
 import time
 
-from mantis_sim.designs import ID_COLUMN, STATUS_OK, run_chunk
+from mantis_sim.designs import ID_COLUMN, SPREAD_ROBOTS_COLUMN, STATUS_OK, run_chunk
 from mantis_sim.errors import InputError
 from mantis_sim.results import force_warnings
 
@@ -45,6 +45,7 @@ class SweepSummary:
     strikes_s: float             # sum of the designs' own computing times (this run)
     workers: int
     where: str
+    spread_robots: int = 0       # robots drawn per design (mantis sweep --spread)
 
     @property
     def overhead_share(self) -> float:
@@ -55,7 +56,11 @@ class SweepSummary:
 
     def __str__(self) -> str:
         rate = self.computed / self.wall_s if self.wall_s > 0 else float('nan')
-        return (f'{self.designs} designs: {self.computed} computed, {self.reused} from the '
+        if self.spread_robots:
+            rate *= 1 + self.spread_robots
+        robots = (f', each with {self.spread_robots} robots of its spread'
+                  if self.spread_robots else '')
+        return (f'{self.designs} designs{robots}: {self.computed} computed, {self.reused} from the '
                 f'earlier table; {self.ok} struck, {self.designs - self.ok} without a strike '
                 f'or failed (see status, reason); {self.wall_s:.1f} s wall on {self.where} '
                 f'({self.workers} worker(s)): {rate:.0f} strikes/s; the designs themselves '
@@ -102,13 +107,21 @@ def chunk_size_for(estimated_strike_s: float, designs: int, workers: int) -> int
 def run_sweep(scene_name: str, overrides: list, designs: list[dict], out: Path, *,
               scheduler: str | None = None, workers: int | None = None,
               chunk_size: int | None = None, estimated_strike_s: float = 0.01,
-              progress: bool = True) -> SweepSummary:
-    """Compute the designs ``out`` lacks and write the table (module docstring)."""
+              progress: bool = True, spread_robots: int = 0,
+              spread_seed: int = 1) -> SweepSummary:
+    """Compute the designs ``out`` lacks and write the table (module docstring). With
+    ``spread_robots`` N, each row also holds its quantiles over N robots of the scene's spread
+    (mantis_sim.designs); an earlier row without them, or with another N or seed, is
+    computed again."""
     from mantis_sim.designs import design_id
     from mantis_sim.scene import load_scene
     out = Path(out)
     capacity_n = load_scene(scene_name, overrides).loadcell.capacity_N
-    earlier = {row[ID_COLUMN]: _with_warning(row, capacity_n) for row in read_table(out)}
+    earlier = {row[ID_COLUMN]: _with_warning(row, capacity_n) for row in read_table(out)
+               if (row.get(SPREAD_ROBOTS_COLUMN) or 0) == spread_robots
+               and (not spread_robots or row.get('spread_seed') == spread_seed)}
+    work = (spread_robots, spread_seed)
+    estimated_strike_s *= 1 + spread_robots
     ids = [design_id(d) for d in designs]
     todo = [(i, d) for i, (i_d, d) in enumerate(zip(ids, designs)) if i_d not in earlier]
     rows = {i: earlier[i_d] for i, i_d in enumerate(ids) if i_d in earlier}
@@ -139,7 +152,7 @@ def run_sweep(scene_name: str, overrides: list, designs: list[dict], out: Path, 
             where, n_workers = 'this process', 1
             size = chunk_size or chunk_size_for(estimated_strike_s, len(todo), 1)
             for chunk in _chunks(todo, size):
-                finished(run_chunk(scene_name, overrides, [d for _, d in chunk]),
+                finished(run_chunk(scene_name, overrides, [d for _, d in chunk], *work),
                          [i for i, _ in chunk])
                 checkpoint()
         else:
@@ -149,7 +162,8 @@ def run_sweep(scene_name: str, overrides: list, designs: list[dict], out: Path, 
                 n_workers = max(1, len(client.scheduler_info().get('workers', {})))
                 size = chunk_size or chunk_size_for(estimated_strike_s, len(todo), n_workers)
                 chunks = list(_chunks(todo, size))
-                _run_on_cluster(client, scene_name, overrides, chunks, finished, checkpoint)
+                _run_on_cluster(client, scene_name, overrides, chunks, work, finished,
+                                checkpoint)
             finally:
                 client.close()
                 if cluster is not None:
@@ -163,7 +177,7 @@ def run_sweep(scene_name: str, overrides: list, designs: list[dict], out: Path, 
     return SweepSummary(designs=len(designs), computed=len(todo), reused=len(designs) - len(todo),
                         ok=sum(r.get('status') == STATUS_OK for r in ordered),
                         wall_s=last_row - started, strikes_s=strikes_s,
-                        workers=n_workers, where=where)
+                        workers=n_workers, where=where, spread_robots=spread_robots)
 
 
 def _with_warning(row: dict, capacity_n: float) -> dict:
@@ -179,11 +193,11 @@ def _chunks(items: list, size: int):
         yield items[start:start + size]
 
 
-def _run_on_cluster(client, scene_name, overrides, chunks, finished, checkpoint) -> None:
+def _run_on_cluster(client, scene_name, overrides, chunks, work, finished, checkpoint) -> None:
     from dask.distributed import as_completed
     futures = {}
     for chunk in chunks:
-        future = client.submit(run_chunk, scene_name, overrides, [d for _, d in chunk],
+        future = client.submit(run_chunk, scene_name, overrides, [d for _, d in chunk], *work,
                                pure=False)
         futures[future] = [i for i, _ in chunk]
     for future in as_completed(futures):

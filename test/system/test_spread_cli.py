@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from mantis_rig.cli import main as mantis
+from mantis_sim.robots import DESIGN_METRICS
 from mantis_sim.scene import load_scene, load_scene_file
-from mantis_sim.studies.forecast import DESIGN_METRICS
 
 TABLE = 'real_trials/authors_summary_train.csv'
 LEVELS = [f'q{5 * k:02d}' for k in range(1, 20)]
@@ -110,3 +110,48 @@ def test_identify_fits_the_spread_into_the_scene_and_compare_draws_from_it(tmp_p
     assert scene.tendon == shipped.tendon and scene.hinge == shipped.hinge
     assert compare(tmp_path / 'cmp', '--spread', '4', '--scene',
                    f'water_23mm={out / "water_23mm.yaml"}') == 0
+
+
+def test_sweep_gives_each_design_its_quantiles_and_the_plot_weighs_effects_against_them(
+        tmp_path, capsys):
+    out = tmp_path / 'study.parquet'
+    args = ['sweep', '--scene', 'air_23mm', '--vary', 'geometry.d_t_mm=19:25:3', '--vary',
+            'drive.pull_speed_mm_per_s=0.5:2.5:2', '--spread', '10', '--out', str(out),
+            '--workers', '0', '--quiet']
+    assert mantis(args) == 0
+    from mantis_sim.studies.sweep import read_table
+    rows = read_table(out)
+    assert len(rows) == 6 and all(r['spread_robots'] == 10 for r in rows)
+    for row in rows:
+        for metric in ('peak_tip_speed_mps', 'spring_energy_mJ', 'peak_tendon_force_N'):
+            q = [row[f'{metric}_{level}'] for level in LEVELS]
+            assert q == sorted(q), metric
+    # the same robots at every design: the pull speed moves no quantile by much
+    by_guide = {}
+    for row in rows:
+        by_guide.setdefault(row['geometry.d_t_mm'], []).append(row['peak_tip_speed_mps_q50'])
+    assert all(abs(a - b) < 0.05 for a, b in by_guide.values())
+    # a rerun with another seed computes every design again; with the same, none
+    capsys.readouterr()
+    assert mantis(args + ['--spread-seed', '2']) == 0
+    assert '6 computed, 0 from the earlier table' in capsys.readouterr().err
+    assert mantis(args + ['--spread-seed', '2']) == 0
+    assert '0 computed, 6 from the earlier table' in capsys.readouterr().err
+    assert mantis(['sweep-plot', str(out), '--out', str(tmp_path / 'figs')]) == 0
+    text = capsys.readouterr().out
+    assert (tmp_path / 'figs' / 'intervals_peak_tip_speed_mps.png').stat().st_size > 10_000
+    with open(tmp_path / 'figs' / 'spread_effects.csv') as handle:
+        effects = {e['key']: e for e in csv.DictReader(handle)}
+    assert set(effects) == {'geometry.d_t_mm', 'drive.pull_speed_mm_per_s'}
+    guide = effects['geometry.d_t_mm']
+    assert float(guide['change_of_median']) < 0 < float(guide['one_strike_sd'])
+    assert 'geometry.d_t_mm 19 to 25: the median peak_tip_speed_mps changes by' in text
+    assert 'strikes per design (80 % power, 5 % level)' in text
+
+
+def test_sweep_refuses_a_spread_the_scene_lacks(tmp_path, capsys):
+    code = mantis(['sweep', '--scene', 'reference_air_23mm', '--vary',
+                   'geometry.d_t_mm=19:25:3', '--spread', '10', '--out',
+                   str(tmp_path / 'x.parquet'), '--workers', '0', '--quiet'])
+    assert code == 2
+    assert 'reference_air_23mm has none' in capsys.readouterr().err
