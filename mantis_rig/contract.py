@@ -408,8 +408,11 @@ WORLD_PARAMETERS = (
     ParamSpec('scene', DEFAULT_SCENE, '', 'mantis_sim scene name (see `mantis scenes`) or '
               'YAML path'),
     ParamSpec('set', [], '', 'scene overrides, key=value each (as `mantis simulate --set`)'),
-    ParamSpec('seed', 0, '', 'random seed (the world itself is deterministic; kept for the '
-              'command line; sensor noise is seeded in the device nodes)', (0, 2**31 - 1)),
+    ParamSpec('seed', 0, '', 'seed of the session\'s robots when the scene has a spread: the '
+              'day drawn once, where the arm sits drawn at each latching (mantis_sim.robots; '
+              'sensor noise is seeded in the device nodes)', (0, 2**31 - 1)),
+    ParamSpec('draw_robots', True, '', 'draw each latching\'s robot from the scene\'s spread '
+              '(a scene without one: always its own robot)'),
     ParamSpec('real_time_factor', 1.0, '', 'simulated seconds per wall second (0: as fast as '
               'it can)', (0.0, 1000.0)),
     ParamSpec('step_s', 0.01, 's', 'simulated time per world step', (1e-4, 0.1)),

@@ -84,4 +84,34 @@ def design_spread(scene: Scene, n: int, seed: int, mapper: Callable) -> DesignSp
     return DesignSpread(samples, n, sum('reason' in r for r in results), reasons)
 
 
-__all__ = ['DESIGN_METRICS', 'DesignSpread', 'design_spread', 'scene_spread', 'simulate_robot']
+class SessionRobots:
+    """The robots of one simulated session on the rig, one day's: ``robots(n)`` is the scene
+    of the n-th latching. What the spread leaves uncertain (the parameters, the latent's mean
+    and day scatter: Spread.one_model) and the day's assembly are drawn once from the seed;
+    where the arm sits is drawn anew at each latching, about the day's level, so that a
+    session varies as a real one does. The discrepancy is the statistics of measured values,
+    not physics: a session's sensors measure the physics as it is."""
+
+    def __init__(self, scene: Scene, seed: int):
+        self.scene, self.seed = scene, seed
+        rng = np.random.default_rng(seed)
+        model = scene_spread(scene).one_model(rng)
+        self._model = model
+        self._fixed = ({} if model.parameters is None
+                       else dict(zip(model.parameters.keys, map(float, model.parameters.values))))
+        lat = model.latent
+        self._day_level = None if lat is None else float(rng.normal(lat.mean, lat.day_sd))
+
+    def __call__(self, latching: int) -> Scene:
+        values = dict(self._fixed)
+        lat = self._model.latent
+        if lat is not None:
+            rng = np.random.default_rng([self.seed, latching])
+            lower, upper = self._model.latent_range(self.scene.geometry.contact_angle_deg)
+            values[lat.key] = float(np.clip(self._day_level + rng.normal(0.0, lat.strike_sd),
+                                            lower, upper))
+        return self.scene.with_values(values) if values else self.scene
+
+
+__all__ = ['DESIGN_METRICS', 'DesignSpread', 'SessionRobots', 'design_spread', 'scene_spread',
+           'simulate_robot']

@@ -141,16 +141,23 @@ class Spread:
         draws = rng.multivariate_normal(p.values, p.covariance, n, method='eigh')
         return np.clip(draws, p.lower, p.upper)
 
-    def _latent_draws(self, n: int, rng: np.random.Generator,
-                      contact_angle_deg: float) -> np.ndarray:
+    def latent_range(self, contact_angle_deg: float) -> tuple[float, float]:
+        """Where the latent may lie for a design of this contact angle: its range, and for the
+        latch offset the latched arm within [0, 15] degrees."""
         lat = self.latent
         lower, upper = lat.lower, lat.upper
-        if lat.key == 'geometry.latch_offset_deg':      # the latched arm within [0, 15] deg
+        if lat.key == 'geometry.latch_offset_deg':
             lower = max(lower, -contact_angle_deg)
             upper = min(upper, 15.0 - contact_angle_deg)
         if not lower < upper:
             raise ParameterError(f'{lat.key}: no value lies in [{lower:g}, {upper:g}] for a '
                                  f'contact angle of {contact_angle_deg:g} degrees')
+        return lower, upper
+
+    def _latent_draws(self, n: int, rng: np.random.Generator,
+                      contact_angle_deg: float) -> np.ndarray:
+        lat = self.latent
+        lower, upper = self.latent_range(contact_angle_deg)
         day_sd = lat.day_sd
         if math.isfinite(lat.day_dof):
             day_sd = lat.day_sd * np.sqrt(lat.day_dof / rng.chisquare(lat.day_dof, n))

@@ -65,7 +65,9 @@ def _stack_arguments(parser) -> None:
                         help='simulated seconds per wall second (sim backend; default 1; '
                         'simulated time slips when the machine cannot keep up; 0: as fast '
                         'as the stack keeps up, the world waiting for the load cell\'s stream)')
-    parser.add_argument('--seed', type=int, default=0, help='sensor noise seed (sim backend)')
+    parser.add_argument('--seed', type=int, default=0,
+                        help='seed of the simulated session (sim backend): sensor noise, and '
+                             'the robots drawn from the scene\'s spread (docs/spread.md)')
     parser.add_argument('--namespace', default='', metavar='/NS',
                         help='the rig\'s ROS namespace, e.g. /rig2: every node, topic and '
                         'service under it, so that two rigs share a domain (default: none)')

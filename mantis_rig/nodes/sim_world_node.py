@@ -26,6 +26,7 @@ from mantis_rig.hardware.local_world import WorldRunner
 from mantis_rig.nodes.device_node import declare, param_value, time_msg
 from mantis_rig.nodes.executors import SideNode
 from mantis_rig.recording.force_block import force_block_from_msg
+from mantis_sim.robots import SessionRobots
 from mantis_sim.scene import load_scene
 from mantis_sim.world import World
 
@@ -44,7 +45,10 @@ class SimWorldNode(WithoutDefaultEventHandlers, Node):
             declare(self, spec)
         value = self._value
         self.scene = load_scene(value('scene'), [s for s in value('set') or [] if s])
-        self.world = World(self.scene, operator_relatches=value('relatch'))
+        robots = (SessionRobots(self.scene, value('seed'))
+                  if value('draw_robots') and self.scene.spread is not None else None)
+        self.world = (World(robots(1), relatch_scene=robots, operator_relatches=value('relatch'))
+                      if robots else World(self.scene, operator_relatches=value('relatch')))
         self.step_s = value('step_s')
         self._step_index = round(self.world.time_s / self.step_s)
         self._phase = self.world.phase

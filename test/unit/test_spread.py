@@ -244,3 +244,23 @@ def test_the_spread_needs_more_than_one_day():
                for s in strikes]
     with pytest.raises(ValueError, match='at least two recording days'):
         spread_fit.latent_model([_latent(s, 1.0) for s in strikes], 'geometry.latch_offset_deg')
+
+
+# ------------------------------------------------------------------ a simulated session
+def test_a_session_draws_its_day_once_and_where_the_arm_sits_at_each_latching():
+    from mantis_sim.robots import SessionRobots
+    from mantis_sim.world import World
+    scene = load_scene('air_23mm_rig')
+    robots = SessionRobots(scene, 3)
+    offsets = [robots(n).geometry.latch_offset_deg for n in range(1, 41)]
+    assert offsets == [SessionRobots(scene, 3)(n).geometry.latch_offset_deg
+                       for n in range(1, 41)]
+    # about one day's level, scattered as strikes of one day are (sd 1.4 degrees)
+    assert 0.7 < np.std(offsets) < 2.2 and len(set(offsets)) > 30   # some at the latch's end
+    days = [SessionRobots(scene, seed)(1).geometry.latch_offset_deg for seed in range(40)]
+    assert np.std(days) > 2.0                     # days differ more (sd 3.9 degrees)
+    # the world strikes each latching with its own robot
+    world = World(robots(1), relatch_scene=robots)
+    assert world.scene.geometry.latch_offset_deg == offsets[0]
+    with pytest.raises(ValueError, match='has no spread'):
+        SessionRobots(load_scene('reference_air_23mm'), 1)
