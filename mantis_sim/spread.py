@@ -28,7 +28,7 @@ from typing import Optional
 
 import numpy as np
 
-from .parameters import ParameterError
+from .parameters import SECTIONS, ParameterError, describe
 
 #: The metrics a discrepancy and a climatology are kept for, as a strike report names them.
 METRICS = ('peak_tip_speed_mps', 'spring_energy_mJ')
@@ -197,18 +197,18 @@ class Spread:
 
     @classmethod
     def from_mapping(cls, data, where: str) -> Spread:
-        """A scene file's `spread` section; a malformed one is named with ``where``."""
-        if not isinstance(data, dict):
-            raise ParameterError(f'{where}: spread must be a mapping, got {type(data).__name__}')
+        """A scene file's `spread` section; a malformed one is refused (ParameterError) naming
+        ``where`` and the field."""
+        data = _mapping(data, where, 'spread')
         unknown = set(data) - {'latent', 'parameters', 'correlation', 'discrepancy',
                                'climatology', 'provenance'}
         if unknown:
-            raise ParameterError(f'{where}: spread: unknown key(s) {", ".join(sorted(unknown))}')
+            raise ParameterError(f'{where}: spread: unknown key(s) '
+                                 f'{", ".join(sorted(map(str, unknown)))}')
         return cls(_latent(data.get('latent'), where), _parameters(data, where),
-                   _discrepancy(data.get('discrepancy') or {}, where),
-                   _climatology(data.get('climatology') or {}, where),
-                   dict(data.get('provenance') or {}))
-
+                   _discrepancy(_mapping(data.get('discrepancy'), where, 'discrepancy'), where),
+                   _climatology(_mapping(data.get('climatology'), where, 'climatology'), where),
+                   _mapping(data.get('provenance'), where, 'provenance'))
 
 def _sig(value) -> float:
     """A float to 6 significant digits: what a scene file needs, readably."""
@@ -216,6 +216,8 @@ def _sig(value) -> float:
 
 
 def _number(value, where: str, name: str, minimum: Optional[float] = None) -> float:
+    if isinstance(value, bool):
+        raise ParameterError(f'{where}: spread: {name} = {value!r} is not a number')
     try:
         number = float(value)
     except (TypeError, ValueError):
@@ -226,18 +228,53 @@ def _number(value, where: str, name: str, minimum: Optional[float] = None) -> fl
     return number
 
 
+def _mapping(value, where: str, name: str) -> dict:
+    """``value`` as a mapping ({} if absent); anything else is refused, naming ``name``."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise ParameterError(f'{where}: spread: {name} must be a mapping, got '
+                             f'{type(value).__name__} {value!r}')
+    return value
+
+
+def _span(value, where: str, name: str) -> tuple[float, float]:
+    """[low, high] with low < high (either may be infinite)."""
+    if value is None:
+        return -math.inf, math.inf
+    if not (isinstance(value, (list, tuple)) and len(value) == 2):
+        raise ParameterError(f'{where}: spread: {name} = {value!r} is not [low, high]')
+    try:
+        low, high = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ParameterError(f'{where}: spread: {name} = {value!r} is not [low, high] in '
+                             f'numbers') from None
+    if not low < high:
+        raise ParameterError(f'{where}: spread: {name} = {value!r}: need low < high')
+    return low, high
+
+
+def _scene_key(value, where: str, name: str) -> str:
+    """A numeric scene key section.name, as a scene file's sections define it."""
+    section, _, field = str(value).partition('.')
+    known = {key for key, default, _, _ in describe(section)} if section in SECTIONS else set()
+    if not isinstance(value, str) or value not in known:
+        raise ParameterError(f'{where}: spread: {name} {value!r} is not a scene key '
+                             f'(section.name, e.g. geometry.latch_offset_deg)')
+    return value
+
+
 def _latent(data, where: str) -> Optional[Latent]:
     if data is None:
         return None
-    if not isinstance(data, dict) or 'key' not in data:
+    data = _mapping(data, where, 'latent')
+    if 'key' not in data:
         raise ParameterError(f'{where}: spread: latent must be a mapping with key, mean, '
                              f'mean_std_error, day_sd, strike_sd and range')
-    span = data.get('range', [-math.inf, math.inf])
-    if not (isinstance(span, (list, tuple)) and len(span) == 2):
-        raise ParameterError(f'{where}: spread: latent range = {span!r} is not [low, high]')
-    lower, upper = (float(v) for v in span)
+    lower, upper = _span(data.get('range'), where, 'latent range')
     dof = data.get('day_dof')
-    return Latent(str(data['key']), _number(data.get('mean'), where, 'latent mean'),
+    return Latent(_scene_key(data['key'], where, 'latent key'),
+                  _number(data.get('mean'), where, 'latent mean'),
                   _number(data.get('mean_std_error', 0.0), where, 'latent mean_std_error', 0.0),
                   _number(data.get('day_sd'), where, 'latent day_sd', 0.0),
                   _number(data.get('strike_sd'), where, 'latent strike_sd', 0.0), lower, upper,
@@ -246,21 +283,19 @@ def _latent(data, where: str) -> Optional[Latent]:
 
 
 def _parameters(data: dict, where: str) -> Optional[ParameterSpread]:
-    params = data.get('parameters')
+    params = _mapping(data.get('parameters'), where, 'parameters')
     if not params:
         return None
-    keys = tuple(params)
-    values = np.array([_number(params[k].get('value'), where, f'{k} value') for k in keys])
-    sd = np.array([_number(params[k].get('std_error'), where, f'{k} std_error', 0.0)
+    keys = tuple(_scene_key(k, where, 'parameter') for k in params)
+    entries = {k: _mapping(params[k], where, f'parameter {k}') for k in keys}
+    values = np.array([_number(entries[k].get('value'), where, f'{k} value') for k in keys])
+    sd = np.array([_number(entries[k].get('std_error'), where, f'{k} std_error', 0.0)
                    for k in keys])
-    bounds = np.array([params[k].get('bounds', [-math.inf, math.inf]) for k in keys], float)
+    bounds = np.array([_span(entries[k].get('bounds'), where, f'{k} bounds') for k in keys])
     corr = np.eye(len(keys))
-    table = data.get('correlation') or {}
-    if not isinstance(table, dict):
-        raise ParameterError(f'{where}: spread: correlation must map a parameter to '
-                             f'{{other parameter: correlation}}')
+    table = _mapping(data.get('correlation'), where, 'correlation')
     for a, row in table.items():
-        for b, rho in (row or {}).items():
+        for b, rho in _mapping(row, where, f'correlation of {a}').items():
             if a not in keys or b not in keys or a == b:
                 raise ParameterError(f'{where}: spread: correlation of {a} with {b}: both '
                                      f'must be distinct parameters of the spread')
@@ -281,6 +316,7 @@ def _discrepancy(data: dict, where: str) -> tuple:
         if metric not in METRICS:
             raise ParameterError(f'{where}: spread: discrepancy of {metric!r}: known metrics '
                                  f'are {", ".join(METRICS)}')
+        entry = _mapping(entry, where, f'discrepancy of {metric}')
         out.append(Discrepancy(metric, _number(entry.get('bias', 0.0), where, 'bias'),
                                _number(entry.get('bias_std_error', 0.0), where,
                                        'bias_std_error', 0.0),
@@ -294,6 +330,9 @@ def _climatology(data: dict, where: str) -> dict:
         if metric not in METRICS:
             raise ParameterError(f'{where}: spread: climatology of {metric!r}: known metrics '
                                  f'are {", ".join(METRICS)}')
+        if not isinstance(values, (list, tuple)):
+            raise ParameterError(f'{where}: spread: climatology of {metric} must be a list of '
+                                 f'measured values, got {values!r}')
         out[metric] = tuple(_number(v, where, f'climatology {metric}') for v in values)
     return out
 

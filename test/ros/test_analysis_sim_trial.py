@@ -28,7 +28,6 @@ from mantis_rig.contract import SIM_WORLD_NODE, STAGE_NODE
 from mantis_rig.nodes.bringup import Stack, StackConfig
 from mantis_rig.nodes.trial_client import TrialClient
 from mantis_sim.results import simulate
-from mantis_sim.robots import SessionRobots
 from mantis_sim.scene import load_scene
 from mantis_sim.world import CAMERA_ORIGIN_MM
 
@@ -44,7 +43,11 @@ def trial(tmp_path_factory):
     """(analysis report of the bag, the world's truth) of one simulated trial."""
     out = tmp_path_factory.mktemp('sim_trial')
     rclpy.init()                      # on the module's domain (conftest.module_ros_domain)
-    stack = Stack(StackConfig(scene=SCENE, real_time_factor=RTF,
+    # The scene's own robot, not one drawn from its spread: the analysis sets theta3 from the
+    # recorded contact angle, and an arm latched 0.56 degrees off it (seed 0's first robot)
+    # moves the overcentering by 3.5 frames. What is judged here is the analysis given the
+    # true geometry.
+    stack = Stack(StackConfig(scene=SCENE, real_time_factor=RTF, world={'draw_robots': False},
                               supervisor={'out': str(out), 'operator_note': 'pytest'},
                               devices={STAGE_NODE: {'move_speed_m_per_s': 2.0e-3}}),
                   log_dir=out / 'logs')
@@ -63,8 +66,7 @@ def trial(tmp_path_factory):
         rclpy.try_shutdown()
     bag = next(p for p in out.iterdir() if p.name.startswith('trial_'))
     assert (bag / 'metadata.yaml').exists()
-    # the robot of the session's first latching (seed 0), drawn from the scene's spread
-    batch = simulate(SessionRobots(load_scene(SCENE), 0)(1)).metrics
+    batch = simulate(load_scene(SCENE)).metrics
     return bag, truth, batch
 
 
@@ -82,9 +84,9 @@ FRAME_S = 1.0 / 19000.0
 
 
 def test_the_world_is_the_batch_simulation(trial):
-    """The trial's world and the batch simulation of its robot (the scene as the session
-    drew it) are the same physics (the pull starts later in the trial): phase durations agree
-    to 1 µs, so the batch's peak tip speed is the world's."""
+    """The trial's world and the batch simulation of the scene are the same physics (the pull
+    starts later in the trial): phase durations agree to 1 µs, so the batch's peak tip speed
+    is the world's."""
     _, truth, batch = trial
     starts = truth['phase_start_s']
     shift = starts['II'] - batch['phase_start_s']['II']
