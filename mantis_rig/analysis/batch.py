@@ -64,6 +64,18 @@ class TrialRefused(InputError):
     """A trial that was read but cannot be analysed; the message says why."""
 
 
+def trial_params(trial, given: dict | None = None) -> tuple:
+    """(AnalysisParams, where they came from) of a trial that was read: its conditions, and
+    ``given``, stated by the user; its recorded force, if any."""
+    try:
+        params, sources = params_for_trial(trial.conditions, given=given or {})
+    except InputError as exc:          # ConditionError (a condition out of range), SceneError
+        raise TrialRefused(str(exc)) from exc
+    if trial.force_N is not None:
+        params.tendon_force_N, params.tendon_force_time_s = trial.force_N, trial.force_time_s
+    return params, sources
+
+
 def analyse_trial(trial, given: dict | None = None) -> tuple:
     """(analysis, warnings, where the parameters came from) of a trial that was read
     (:class:`bag_input.TrialInput`), as ``mantis analyze`` analyses it: its conditions (and
@@ -73,12 +85,7 @@ def analyse_trial(trial, given: dict | None = None) -> tuple:
     warning."""
     tracks = trial.tracks
     last = float(tracks.time_s[-1])
-    try:
-        params, sources = params_for_trial(trial.conditions, given=given or {})
-    except InputError as exc:          # ConditionError (a condition out of range), SceneError
-        raise TrialRefused(str(exc)) from exc
-    if trial.force_N is not None:
-        params.tendon_force_N, params.tendon_force_time_s = trial.force_N, trial.force_time_s
+    params, sources = trial_params(trial, given)
     try:
         analysis = analyze_tracks(tracks, params)
     except (InputError, ValueError, IndexError) as exc:    # refused, or no fit on these data

@@ -17,7 +17,14 @@ from .energy import (
     tendon_length_mm,
     tendon_work_mJ,
 )
-from .kinematics import MIN_STRIKE_ROTATION_RAD, LinkageFit, fit_linkage, tip_speed_mps
+from .kinematics import (
+    MIN_STRIKE_ROTATION_RAD,
+    STRIKE_SPEED_SHARE,
+    JointAngles,
+    LinkageFit,
+    fit_linkage,
+    tip_speed_mps,
+)
 from .smoothing import (
     STRIKE_POLY,
     angle_noise_rad,
@@ -130,11 +137,20 @@ class TrialAnalysis:
         }
 
 
-def analyze_tracks(tracks: MarkerTracks, params: AnalysisParams | None = None) -> TrialAnalysis:
-    """Fit the linkage to marker tracks, then run :func:`analyze_angles` on its angles."""
+def analyze_tracks(tracks: MarkerTracks, params: AnalysisParams | None = None,
+                   speed_share: float = STRIKE_SPEED_SHARE) -> TrialAnalysis:
+    """Fit the linkage to marker tracks (``speed_share``: its strike window,
+    kinematics.strike_window), then analyse its joint angles (:func:`analyze_linkage`)."""
     params = params or AnalysisParams()
     offset = params.arm_axis_offset_rad
-    linkage, angles = fit_linkage(tracks, 0.0 if offset is None else offset)
+    linkage, angles = fit_linkage(tracks, 0.0 if offset is None else offset, speed_share)
+    return analyze_linkage(tracks, linkage, angles, params)
+
+
+def analyze_linkage(tracks: MarkerTracks, linkage: LinkageFit, angles: JointAngles,
+                    params: AnalysisParams) -> TrialAnalysis:
+    """The analysis of the joint angles of a fitted linkage (phases, speeds, energies), checked
+    against the tracks it came from."""
     theta1 = model_theta1(angles.theta1_cam_rad, params.theta1_start_rad,
                           params.guide_direction_cam_rad)
     body = theta1 + (angles.body_angle_rad - angles.theta1_cam_rad)

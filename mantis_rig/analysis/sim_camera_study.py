@@ -119,3 +119,46 @@ def study(scene_name: str = 'air_23mm_rig', frame_rate_hz: float | None = None,
     truth = truth_of(world)
     return truth, phase_sweep(world, truth, frame_rate_hz or scene.camera.frame_rate_hz,
                               n_phases, before_s)
+
+
+@dataclass
+class IntervalCoverage:
+    """How often the analysis's 80 % intervals (analysis.intervals) hold the world's truth,
+    per quantity, over films at evenly spaced frame phases (each its own noise draw)."""
+
+    films: int
+    replicas: int
+    held: dict                  # quantity -> films whose interval held the truth
+    widths: dict                # quantity -> median interval width (its unit)
+    errors: dict                # quantity -> median error of the analysis's value
+
+    def coverage(self, key: str) -> float:
+        return self.held[key] / self.films
+
+
+def interval_coverage(scene_name: str = 'air_23mm_rig', films: int = 20,
+                      replicas: int = 30) -> IntervalCoverage:
+    """One strike of the scene filmed ``films`` times, each analysed with its intervals."""
+    from .intervals import QUANTITIES, track_intervals, value_of
+    scene = load_scene(scene_name)
+    world = run_strike(scene)
+    truth = truth_of(world)
+    params, _ = params_for_trial({'scene': scene.name})
+    true = {'peak_tip_speed_mps': truth.peak_tip_speed_mps,
+            'max_spring_energy_mJ': simulate(scene).metrics['max_spring_energy_mJ'],
+            **{f'phase_start_s.{p}': truth.phase_start_s[p] for p in PHASES}}
+    held = {key: 0 for key in QUANTITIES}
+    widths = {key: [] for key in QUANTITIES}
+    errors = {key: [] for key in QUANTITIES}
+    for k in range(films):
+        tracks = film(world, scene.camera.frame_rate_hz, k / films)
+        result = analyze_tracks(tracks, params)
+        found = track_intervals(tracks, params, result, replicas, seed=k)
+        for key, interval in found.quantities.items():
+            held[key] += interval.holds(true[key])
+            widths[key].append(interval.high - interval.low)
+            errors[key].append(value_of(result.summary(), key) - true[key])
+    return IntervalCoverage(films, replicas, held,
+                            {k: float(np.median(v)) for k, v in widths.items()},
+                            {k: float(np.median(v)) for k, v in errors.items()})
+

@@ -17,6 +17,9 @@ from .options import (
     positive_int,
 )
 
+#: Re-trackings of `mantis analyze --intervals` without N (each costs one analysis).
+INTERVAL_REPLICAS = 40
+
 
 def analysis_report(analysis, trial, path, parameters=()) -> dict:
     """summary() plus what the input was and the tendon's work (if force was recorded).
@@ -56,11 +59,28 @@ def _print_text(report):
         'as the authors publish it)',
         f'L1               {report["L1_mm"]:.2f} mm',
     ]
+    if 'intervals' in report:
+        lines += _interval_lines(report['intervals'])
     if report['input'].get('parameters'):
         lines.append('parameters       ' + '; '.join(report['input']['parameters']))
     if 'tendon_work_to_IV_mJ' in report:
         lines.append(f'tendon work to IV {report["tendon_work_to_IV_mJ"]:.1f} mJ')
     print('\n'.join(lines))
+
+
+def _interval_lines(intervals: dict) -> list[str]:
+    from ..analysis.intervals import QUANTITIES
+    lines = [f'{100 * intervals["level"]:.0f} % intervals (tracking noise: '
+             f'{intervals["replicas"]} replicas; the estimator\'s choices: '
+             f'{intervals["choices"]}; docs/replay_analysis.md):']
+    for key, unit in QUANTITIES.items():
+        entry = intervals[key]
+        if entry['low'] is None or not math.isfinite(entry['low']):
+            lines.append(f'  {key:22s} not seen')
+            continue
+        digits = 4 if unit == 's' else 2
+        lines.append(f'  {key:22s} {entry["low"]:.{digits}f} .. {entry["high"]:.{digits}f} {unit}')
+    return lines
 
 
 def run_analyze(args) -> int:
@@ -97,6 +117,12 @@ def _analyze_one(args) -> int:
     for text in warned:
         err('analyze', f'warning: {text}')
     report = analysis_report(analysis, trial, args.path, parameters)
+    if args.intervals:
+        from ..analysis.batch import trial_params
+        from ..analysis.intervals import track_intervals
+        params, _ = trial_params(trial, given)
+        report['intervals'] = track_intervals(trial.tracks, params, analysis, args.intervals,
+                                              args.seed).to_json()
     if args.plot:
         from ..analysis.plots import plot_trial
         plot_trial(analysis, args.plot, title=Path(args.path).name)
@@ -172,6 +198,13 @@ def add_commands(commands) -> None:
     ana.add_argument('paths', nargs='+', metavar='BAG_OR_TRACKING_FILE_OR_DIR')
     ana.add_argument('--json', action='store_true', help='print the summary as JSON')
     ana.add_argument('--plot', metavar='FILE.png', help='write the trial figure')
+    ana.add_argument('--intervals', type=int, nargs='?', const=INTERVAL_REPLICAS, default=0,
+                     metavar='N',
+                     help='also give the peak tip speed, spring energy and phase starts their '
+                          '80 %% intervals from the tracking noise (N re-trackings, default '
+                          f'{INTERVAL_REPLICAS}) and the estimator\'s choices; costs about N + 6 '
+                          'analyses')
+    ana.add_argument('--seed', type=int, default=0, help='seed of --intervals (default 0)')
     ana.add_argument('--table', metavar='FILE.csv',
                      help='batch: write one row per trial to this CSV table (- for stdout, '
                           'the default when several paths are given without --table)')

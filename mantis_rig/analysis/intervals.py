@@ -1,0 +1,178 @@
+"""Intervals of an analysis's numbers: what the tracking noise and the estimator's choices
+leave uncertain in the peak tip speed, the most spring energy and the phase starts.
+
+- **Tracking noise.** The markers tracked again, ``replicas`` times: each position moved by a
+  jitter and rounded to the tracker's step once more, so that it moves by as much as tracking
+  moved it (the step read off the tracks; the tracker's jitter TRACKING_NOISE_STEPS of it, as
+  on the lab's seven exports: 0.03 px rms at 0.1 px steps), and the whole analysis run on each,
+  the linkage fit included. The positions already hold one
+  such draw: by local linearity the replicas' deviations from the trial's value scatter as the
+  trial's value does about the truth, and reflected about it (the basic bootstrap: the trial's
+  value minus the deviations' upper and lower quantiles) they also undo a bias the noise puts
+  into a maximum.
+- **The estimator's choices.** The trial analysed again with each other reasonable choice: the
+  smoothing's velocity precision halved and doubled, the strike's polynomial window narrower
+  and wider, the linkage's strike window narrower and wider. Which way the estimator errs is
+  not known: the noise interval is widened to hold the trial's value moved by each choice's
+  shift either way.
+- **The frames.** A phase start is found on the frames: its interval is widened by one frame
+  either side.
+
+The interval's level is LEVEL (80 %). A replica or a choice whose analysis fails (no strike
+found in it, say) is counted and left out.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+import functools
+import math
+
+import numpy as np
+
+from mantis_sim.errors import InputError
+
+from .kinematics import STRIKE_SPEED_SHARE, JointAngles, coordinate_resolution_mm, fit_linkage
+from .report import AnalysisParams, TrialAnalysis, analyze_linkage, analyze_tracks
+from .tracking import MarkerTracks
+
+LEVEL = 0.8
+#: The tracker's jitter in units of its step (mantis_sim.parameters.Camera: 0.03 px / 0.1 px).
+TRACKING_NOISE_STEPS = 0.3
+#: The reported quantities: summary key (a dotted one is nested) -> unit.
+QUANTITIES = {'peak_tip_speed_mps': 'm/s', 'max_spring_energy_mJ': 'mJ',
+              'phase_start_s.II': 's', 'phase_start_s.III': 's', 'phase_start_s.IV': 's'}
+# Each estimator choice and its alternatives (the defaults' half and double, or about so).
+SMOOTHING_PRECISION = (0.5, 2.0)              # x AnalysisParams.rel_precision
+STRIKE_WINDOW_SHARE = (1.0 / 10.0, 1.0 / 5.0)  # against the default 1/7
+LINKAGE_SPEED_SHARE = (0.5, 2.0)              # x kinematics.STRIKE_SPEED_SHARE
+
+
+@dataclass(frozen=True)
+class Interval:
+    value: float
+    low: float
+    high: float
+
+    def holds(self, truth: float) -> bool:
+        return self.low <= truth <= self.high
+
+
+@dataclass(frozen=True)
+class Intervals:
+    quantities: dict            # summary key -> Interval
+    replicas: int               # noise replicas analysed
+    choices: int                # alternative choices analysed
+    failed: int                 # replicas and choices whose analysis failed
+
+    def to_json(self) -> dict:
+        return {'level': LEVEL, 'replicas': self.replicas, 'choices': self.choices,
+                'failed': self.failed,
+                **{key: {'low': i.low, 'high': i.high} for key, i in self.quantities.items()}}
+
+
+def value_of(summary: dict, key: str) -> float:
+    section, _, name = key.partition('.')
+    value = summary[section][name] if name else summary[section]
+    return math.nan if value is None else float(value)
+
+
+def track_intervals(tracks: MarkerTracks, params: AnalysisParams, result: TrialAnalysis,
+                    replicas: int, seed: int = 0) -> Intervals:
+    """The intervals of ``result``, the analysis of ``tracks`` with ``params``."""
+    rng = np.random.default_rng(seed)
+    step_mm = coordinate_resolution_mm(tracks)
+    failed = 0
+    noisy = []
+    for _ in range(replicas):
+        copy = _tracked_again(tracks, rng, step_mm)
+        summary = _summary_or_none(lambda c=copy: analyze_tracks(c, params))
+        failed += summary is None
+        if summary is not None:
+            noisy.append(summary)
+    offset = params.arm_axis_offset_rad
+    linkage, angles = fit_linkage(tracks, 0.0 if offset is None else offset)
+    chosen = []
+    for run in _choices(tracks, params, linkage, angles):
+        summary = _summary_or_none(run)
+        failed += summary is None
+        if summary is not None:
+            chosen.append(summary)
+    trial = result.summary()
+    frame_s = float(np.median(np.diff(tracks.time_s)))
+    out = {}
+    for key in QUANTITIES:
+        value = value_of(trial, key)
+        out[key] = _interval(value, [value_of(s, key) for s in noisy],
+                             [value_of(s, key) for s in chosen],
+                             frame_s if QUANTITIES[key] == 's' else 0.0)
+    return Intervals(out, replicas, len(chosen), failed)
+
+
+def _tracked_again(tracks: MarkerTracks, rng: np.random.Generator,
+                   step_mm: float) -> MarkerTracks:
+    """The markers as the tracker might have reported them once more: each position moved by
+    its jitter and rounded to the tracker's step again (a lost position stays lost)."""
+    moved = {}
+    for name, xy in tracks.markers_mm.items():
+        if step_mm > 0:
+            steps = np.round(xy / step_mm + rng.normal(0.0, retrack_sd_steps(), xy.shape))
+            moved[name] = steps * step_mm
+        else:
+            moved[name] = xy + rng.normal(0.0, TRACKING_NOISE_STEPS, xy.shape)
+    return replace(tracks, markers_mm=moved)
+
+
+@functools.cache
+def retrack_sd_steps() -> float:
+    """The jitter (in steps) that, rounded to the step from a position already on it, moves a
+    position by as much as tracking did: the variance of the tracker's error, a rounding
+    (1/12 step^2) on top of its jitter (TRACKING_NOISE_STEPS)."""
+    from scipy.optimize import brentq
+    from scipy.stats import norm
+    target = 1.0 / 12.0 + TRACKING_NOISE_STEPS ** 2
+    k = np.arange(1, 8)
+
+    def variance(sd):           # of round(N(0, sd)): 2 sum k^2 P(round = k)
+        p = norm.cdf((k + 0.5) / sd) - norm.cdf((k - 0.5) / sd)
+        return 2.0 * float(np.sum(k * k * p))
+    return float(brentq(lambda sd: variance(sd) - target, 0.05, 3.0))
+
+
+def _choices(tracks: MarkerTracks, params: AnalysisParams, linkage, angles: JointAngles):
+    """Analyses of the trial with each alternative choice (callables: run lazily)."""
+    for factor in SMOOTHING_PRECISION:
+        varied = replace(params, rel_precision=params.rel_precision * factor)
+        yield lambda p=varied: analyze_linkage(tracks, linkage, angles, p)
+    for share in STRIKE_WINDOW_SHARE:
+        varied = replace(params, strike_window_share=share)
+        yield lambda p=varied: analyze_linkage(tracks, linkage, angles, p)
+    for factor in LINKAGE_SPEED_SHARE:
+        yield lambda f=factor: analyze_tracks(tracks, params, STRIKE_SPEED_SHARE * f)
+
+
+def _summary_or_none(run) -> dict | None:
+    try:
+        return run().summary()
+    except (InputError, ValueError, IndexError, ArithmeticError):   # as analyse_trial refuses
+        return None
+
+
+def _interval(value: float, noisy: list[float], chosen: list[float],
+              resolution: float = 0.0) -> Interval:
+    """The basic bootstrap interval of the noise replicas, widened by the choices' shifts either
+    way and by ``resolution`` either side (a time is found on the frames: within one of the truth at
+    best)."""
+    noisy = np.array([v for v in noisy if math.isfinite(v)])
+    if not math.isfinite(value) or noisy.size < 2:
+        return Interval(value, math.nan, math.nan)
+    tail = (1.0 - LEVEL) / 2.0
+    q_low, q_high = np.quantile(noisy, [tail, 1.0 - tail])
+    low, high = 2.0 * value - q_high, 2.0 * value - q_low
+    shifts = [abs(v - value) for v in chosen if math.isfinite(v)]
+    if shifts:                          # which way the estimator errs is not known
+        low, high = min(low, value - max(shifts)), max(high, value + max(shifts))
+    return Interval(value, float(low - resolution), float(high + resolution))
+
+
+__all__ = ['LEVEL', 'QUANTITIES', 'Interval', 'Intervals', 'track_intervals',
+           'value_of']

@@ -1,0 +1,38 @@
+"""The analysis's intervals (mantis_rig.analysis.intervals): the basic bootstrap reflects the
+re-trackings' deviations about the trial's value, the estimator's choices widen it either way,
+a time is widened by a frame; the re-tracking keeps the tracker's step and lost positions."""
+import numpy as np
+import pytest
+
+from mantis_rig.analysis.intervals import _interval, _tracked_again
+from mantis_rig.analysis.tracking import MarkerTracks
+
+
+def test_the_interval_reflects_the_deviations_and_holds_every_choice():
+    noisy = list(np.linspace(10.0, 12.0, 101))            # re-trackings read high by 0 .. 2
+    interval = _interval(10.0, noisy, [])
+    # the 10 % and 90 % quantiles are 10.2 and 11.8: reflected about 10, 8.2 .. 9.8
+    assert interval.low == pytest.approx(8.2) and interval.high == pytest.approx(9.8)
+    # a choice 0.5 above: the value may be 0.5 off either way
+    widened = _interval(10.0, noisy, [10.5, float('nan')], resolution=0.1)
+    assert widened.low == pytest.approx(8.1) and widened.high == pytest.approx(10.6)
+    assert widened.holds(10.55) and not widened.holds(10.7)
+    far = _interval(10.0, noisy, [6.0])
+    assert far.low == pytest.approx(6.0) and far.high == pytest.approx(14.0)
+    assert np.isnan(_interval(float('nan'), noisy, []).low)
+    assert np.isnan(_interval(10.0, [11.0], []).low)                # too few re-trackings
+
+
+def test_a_re_tracking_keeps_the_step_and_the_lost_positions():
+    xy = np.round(np.random.default_rng(1).uniform(0, 5, (2000, 2)) / 0.017) * 0.017
+    xy[10] = np.nan
+    tracks = MarkerTracks(time_s=np.arange(2000) / 19000.0, frames=np.arange(2000),
+                          markers_mm={'mb1': xy}, handedness='left', source={})
+    again = _tracked_again(tracks, np.random.default_rng(2), 0.017)
+    moved = again.markers_mm['mb1']
+    assert np.isnan(moved[10]).all() and np.isfinite(np.delete(moved, 10, axis=0)).all()
+    steps = moved[np.isfinite(moved)] / 0.017
+    assert np.allclose(steps, np.round(steps))
+    # moved by as much as tracking moves a position: rounding (1/12) and jitter (0.3 steps)
+    deviation = np.delete(moved - xy, 10, axis=0) / 0.017
+    assert np.mean(deviation ** 2) == pytest.approx(1 / 12 + 0.09, rel=0.25)
