@@ -48,6 +48,7 @@ def contract_names() -> set:
 NOT_ROS_NAMES = {
     ('mantis_rig/hardware/nidaq.py', '/line'): 'part of a DAQ line name, Dev1/port0/line0',
     ('mantis_rig/recording/interfaces.py', '/msg/'): 'part of a message type, pkg/msg/Type',
+    ('mantis_rig/analysis/intervals.py', 'm/s'): 'a unit, metres per second',
 }
 
 
