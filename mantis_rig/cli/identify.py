@@ -90,7 +90,8 @@ def add_commands(commands) -> None:
                     'errors (errors.csv), parity plots (parity.png) and, for each --figure '
                     'trial with a recorded motion, its motion beside the simulated one.')
     _strike_arguments(compare)
-    compare.add_argument('--out', type=Path, required=True, help='folder for the outputs')
+    compare.add_argument('--out', type=Path, default=Path('compare'),
+                         help='folder for the outputs (default: compare/ here)')
     compare.add_argument('--figure', action='append', default=[], metavar='TRIAL',
                          help='a trial to plot (theta1, theta3 and rates); repeatable')
     compare.add_argument('--spread', type=int, default=0, metavar='N',

@@ -155,3 +155,11 @@ def test_sweep_refuses_a_spread_the_scene_lacks(tmp_path, capsys):
                    str(tmp_path / 'x.parquet'), '--workers', '0', '--quiet'])
     assert code == 2
     assert 'reference_air_23mm has none' in capsys.readouterr().err
+
+
+def test_compare_writes_into_compare_here_unless_told(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert mantis(['compare', '--strikes', str(data_file(TABLE)), '--group', 'water_23mm',
+                   '--spread', '2', '--workers', '0']) == 0
+    assert (tmp_path / 'compare' / 'predictions.csv').exists()
+    assert 'outputs: compare/errors.csv' in capsys.readouterr().out
