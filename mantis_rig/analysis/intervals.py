@@ -15,8 +15,8 @@ leave uncertain in the peak tip speed, the most spring energy and the phase star
   and wider, the linkage's strike window narrower and wider. Which way the estimator errs is
   not known: the noise interval is widened to hold the trial's value moved by each choice's
   shift either way.
-- **The frames.** A phase start is found on the frames: its interval is widened by one frame
-  either side.
+- **The resolution.** A phase start is found on the frames: its interval is widened by one
+  frame either side; the spring energy by what the body angle's quantisation floor moves it.
 
 The interval's level is LEVEL (80 %). A replica or a choice whose analysis fails (no strike
 found in it, say) is counted and left out.
@@ -98,14 +98,26 @@ def track_intervals(tracks: MarkerTracks, params: AnalysisParams, result: TrialA
         if summary is not None:
             chosen.append(summary)
     trial = result.summary()
-    frame_s = float(np.median(np.diff(tracks.time_s)))
+    resolution = _resolutions(tracks, params, trial, linkage)
     out = {}
     for key in QUANTITIES:
         value = value_of(trial, key)
         out[key] = _interval(value, [value_of(s, key) for s in noisy],
-                             [value_of(s, key) for s in chosen],
-                             frame_s if QUANTITIES[key] == 's' else 0.0)
+                             [value_of(s, key) for s in chosen], resolution.get(key, 0.0))
     return Intervals(out, replicas, len(chosen), failed)
+
+
+def _resolutions(tracks: MarkerTracks, params: AnalysisParams, trial: dict, linkage) -> dict:
+    """What the recording resolves at best: a phase start to a frame; the spring energy,
+    E = k (theta - rest)^2 / 2, to what the body angle's quantisation floor moves it,
+    sqrt(2 k E) times that floor."""
+    frame_s = float(np.median(np.diff(tracks.time_s)))
+    energy = value_of(trial, 'max_spring_energy_mJ')
+    out = {key: frame_s for key, unit in QUANTITIES.items() if unit == 's'}
+    if math.isfinite(energy) and energy > 0:
+        out['max_spring_energy_mJ'] = (math.sqrt(2.0 * params.k_s_Nmm_per_rad * energy)
+                                       * linkage.body_noise_floor_rad)
+    return out
 
 
 def _tracked_again(tracks: MarkerTracks, rng: np.random.Generator,
