@@ -70,11 +70,12 @@ def spread_table(scenes) -> list[str]:
         lat = scenes[group].spread.latent
         lines.append(f'| where the arm sits ({lat.key}), mean of {group} | {lat.mean:+.2f} '
                      f'({lat.mean_std_error:.2f}) degrees |')
+    day_se, strike_se = (errors.get(k) for k in ('day_sd', 'strike_sd'))
     lines.append(f'| its scatter between days (sd) | {first.latent.day_sd:.2f} '
-                 f'({errors.get("day_sd", math.nan):.2f}) degrees, on {first.latent.day_dof:g} '
-                 f'degrees of freedom |')
+                 f'({"n/a" if day_se is None else f"{day_se:.2f}"}) degrees, on '
+                 f'{first.latent.day_dof:g} degrees of freedom |')
     lines.append(f'| its scatter within a day (sd) | {first.latent.strike_sd:.2f} '
-                 f'({errors.get("strike_sd", math.nan):.2f}) degrees |')
+                 f'({"n/a" if strike_se is None else f"{strike_se:.2f}"}) degrees |')
     for d in first.discrepancy:
         label = forecast.FORECAST_METRICS[d.metric][1]
         lines.append(f'| discrepancy of the {label}, measured / simulated - 1: bias; scatter '

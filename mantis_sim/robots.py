@@ -19,7 +19,7 @@ from .studies.strikes import lab_spring_energy_mJ
 
 def scene_spread(scene: Scene) -> Spread:
     if scene.spread is None:
-        raise ValueError(f'scene {scene.name} has no spread: fit one with `mantis identify '
+        raise ParameterError(f'scene {scene.name} has no spread: fit one with `mantis identify '
                          f'--spread` (docs/spread.md)')
     return scene.spread
 

@@ -249,7 +249,7 @@ def run_identify(args) -> int:
         calibrated = {g: load_scene(str(args.out / paths[g].name)) for g in paths}
         with ClusterMap(args.scheduler, args.workers, progress=not args.json) as mapper:
             report['spread'] = _fit_and_write_spreads(args, mapper, strikes, calibrated, {
-                g: args.out / p.name for g, p in paths.items()})
+                g: (args.out / p.name, args.out / p.name) for g, p in paths.items()})
     if args.json:
         print(json.dumps(json_safe(report)))
     else:
@@ -265,13 +265,9 @@ def _identify_spread_only(args, strikes, scenes, paths) -> int:
     with ClusterMap(args.scheduler, args.workers, progress=not args.json) as mapper:
         _log(f'identify: the spread of {len(strikes)} strikes ({", ".join(sorted(scenes))}) on '
              f'{mapper.where}; the scenes\' parameters kept')
-        args.out.mkdir(parents=True, exist_ok=True)
-        targets = {g: args.out / p.name for g, p in paths.items()}
-        for group, path in paths.items():
-            if targets[group].resolve() != path.resolve():
-                targets[group].write_text(path.read_text(encoding='utf-8'), encoding='utf-8')
-        report = {'spread': _fit_and_write_spreads(args, mapper, strikes, scenes, targets),
-                  'scenes': [str(t) for t in targets.values()]}
+        files = {g: (p, args.out / p.name) for g, p in paths.items()}
+        report = {'spread': _fit_and_write_spreads(args, mapper, strikes, scenes, files),
+                  'scenes': [str(target) for _, target in files.values()]}
     if args.json:
         print(json.dumps(json_safe(report)))
     else:
@@ -279,14 +275,16 @@ def _identify_spread_only(args, strikes, scenes, paths) -> int:
     return 0
 
 
-def _fit_and_write_spreads(args, mapper, strikes, scenes, targets) -> dict:
-    """Fit the spread (spread_fit) and write it into each group's scene file at ``targets``;
-    the report's 'spread' entry."""
+def _fit_and_write_spreads(args, mapper, strikes, scenes, files) -> dict:
+    """Fit the spread (spread_fit), then write each group's scene file, group -> (the scene
+    file, where to write it with its spread); the report's 'spread' entry. Nothing is written
+    if the fit fails."""
     sources = [str(args.strikes)] + ([str(args.processed)] if args.processed else [])
     spreads, latents, model = spread_fit.fit_spreads(
         scenes, strikes, mapper, args.spread_latent, sources=sources, log=_log)
-    for group, target in targets.items():
-        doc = yaml.safe_load(target.read_text(encoding='utf-8'))
+    args.out.mkdir(parents=True, exist_ok=True)
+    for group, (source, target) in files.items():
+        doc = yaml.safe_load(source.read_text(encoding='utf-8'))
         doc['spread'] = json_safe(spreads[group].to_mapping())
         target.write_text(yaml.safe_dump(doc, sort_keys=False, width=100), encoding='utf-8')
     report = {'latent': model.key,
@@ -301,6 +299,10 @@ def _fit_and_write_spreads(args, mapper, strikes, scenes, targets) -> dict:
     return report
 
 
+def _std_error_text(value: float) -> str:
+    return f'{value:.2f}' if math.isfinite(value) else 'at zero: the days agree'
+
+
 def _spread_text(spread: dict) -> str:
     lines = [f'spread: {spread["latent"]} over {spread["strikes"]} strikes of '
              f'{spread["days"]} recording days (mixed model, REML)',
@@ -308,8 +310,9 @@ def _spread_text(spread: dict) -> str:
     lines += [f'  {g:12s} {m["value"]:+6.2f} ({m["std_error"]:.2f})'
               for g, m in spread['means'].items()]
     lines.append(f'  between days: sd {spread["day_sd"]["value"]:.2f} '
-                 f'({spread["day_sd"]["std_error"]:.2f}); within a day: sd '
-                 f'{spread["strike_sd"]["value"]:.2f} ({spread["strike_sd"]["std_error"]:.2f})')
+                 f'({_std_error_text(spread["day_sd"]["std_error"])}); within a day: sd '
+                 f'{spread["strike_sd"]["value"]:.2f} '
+                 f'({_std_error_text(spread["strike_sd"]["std_error"])})')
     lines.append('  discrepancy, measured/simulated - 1, every group: bias (s.e.), scatter (sd)')
     for metric, d in spread['discrepancy'].items():
         lines.append(f'  {metric:20s} {100 * d["bias"]:+5.1f} % ({100 * d["bias_std_error"]:.1f} '

@@ -32,7 +32,6 @@ from mantis_sim.spread import (
 )
 
 from .identify import simulate_task
-from .spread_fit import MEASURED
 from .strikes import RealStrike
 
 #: metric -> (its column stem in predictions.csv, its label and unit)
@@ -49,7 +48,7 @@ class StrikeForecast:
     climatology: dict       # metric -> the group's training values (the spread's)
 
     def measured(self, metric: str) -> Optional[float]:
-        return getattr(self.strike, MEASURED[metric])
+        return getattr(self.strike, metric)     # a RealStrike's measured value, or None
 
 
 def strike_rng(seed: int, index: int) -> np.random.Generator:

@@ -34,11 +34,18 @@ import warnings
 import numpy as np
 
 from mantis_sim.scene import Scene
-from mantis_sim.spread import Discrepancy, Latent, ParameterSpread, Spread
+from mantis_sim.spread import METRICS, Discrepancy, Latent, ParameterSpread, Spread
 
 from .day_state import DayStateFit
 from .fidelity import LATCH_KEY, SimulatedStrike
-from .identify import FreeParameter, Weights, parse_free_parameter, simulate_task, split_label
+from .identify import (
+    FreeParameter,
+    IdentificationError,
+    Weights,
+    parse_free_parameter,
+    simulate_task,
+    split_label,
+)
 from .strikes import RealStrike
 
 DEFAULT_LATENT = f'{LATCH_KEY}=-5:12'
@@ -46,7 +53,6 @@ DEFAULT_LATENT = f'{LATCH_KEY}=-5:12'
 # recorded motion are the identification's business
 LATENT_WEIGHTS = Weights(tip_speed=1.0, spring_energy=1.0, body_speed=0.0, arm_speed=0.0,
                          series=0.0)
-MEASURED = {'peak_tip_speed_mps': 'peak_tip_speed_mps', 'spring_energy_mJ': 'spring_energy_mJ'}
 
 
 @dataclass(frozen=True)
@@ -59,7 +65,7 @@ class StrikeLatent:
 
     def correction(self, metric: str) -> float:
         """measured / simulated - 1 at the strike's own latent: the discrepancy's sample."""
-        measured = getattr(self.strike, MEASURED[metric])
+        measured = getattr(self.strike, metric)
         predicted = getattr(self.simulated, metric)
         if measured is None or not (math.isfinite(predicted) and predicted > 0):
             return math.nan
@@ -103,57 +109,69 @@ def latent_model(latents: Sequence[StrikeLatent], key: str) -> LatentModel:
     used = [x for x in latents if x.simulated.status == 'strike']
     groups = sorted({x.strike.group for x in used})
     if len(used) < 3 or len({(x.strike.group, x.strike.recording_day) for x in used}) < 2:
-        raise ValueError(f'the spread needs strikes of at least two recording days; got '
-                         f'{len(used)} strikes')
+        raise IdentificationError(f'the spread needs strikes of at least two recording '
+                                  f'days; got {len(used)} strikes')
     y = np.array([x.value for x in used])
     exog = np.array([[x.strike.group == g for g in groups] for x in used], dtype=float)
     units = [f'{x.strike.group}#{x.strike.recording_day}' for x in used]
-    result = _mixed_model(y, exog, units)
-    day_var = float(result.cov_re[0, 0])
-    day_var_se = float(np.asarray(result.bse_re).ravel()[0])
-    strike_var = float(result.scale)
+    fit = _mixed_model(y, exog, units)
     days = len(set(units))
     # the within-day variance's standard error: as for a sample variance on the degrees of
     # freedom left within days (statsmodels reports none for the scale)
     within_dof = max(len(used) - days, 1)
-    strike_sd = math.sqrt(strike_var)
-    day_sd = math.sqrt(max(day_var, 0.0))
+    strike_sd = math.sqrt(fit.strike_var)
+    # REML ends the day variance at its bound, zero, only to within its optimiser's tolerance:
+    # a day scatter under 3 % of the strikes' is taken as none
+    day_sd = math.sqrt(fit.day_var) if fit.day_var > 1e-3 * fit.strike_var else 0.0
     return LatentModel(
-        key, {g: (float(m), float(se)) for g, m, se in zip(groups, result.fe_params,
-                                                           result.bse_fe)},
-        day_sd, _sd_std_error(day_sd, day_var_se), strike_sd,
+        key, {g: (float(m), float(se)) for g, m, se in zip(groups, fit.means, fit.mean_std_errors)},
+        day_sd, _sd_std_error(day_sd, fit.day_var_std_error), strike_sd,
         strike_sd / math.sqrt(2.0 * within_dof), days, len(used))
 
 
-def _mixed_model(y: np.ndarray, exog: np.ndarray, units: list):
+@dataclass(frozen=True)
+class _MixedFit:
+    means: np.ndarray               # the fixed effects
+    mean_std_errors: np.ndarray
+    day_var: float                  # the random intercept's variance
+    day_var_std_error: float        # NaN where statsmodels gives none (the variance at zero)
+    strike_var: float               # the residual variance
+
+
+def _mixed_model(y: np.ndarray, exog: np.ndarray, units: list) -> _MixedFit:
     """statsmodels' MixedLM of y on exog with a random intercept per unit, fitted by REML.
     (statsmodels, a slow import, is loaded here, not by every `mantis` command.) Where the
     days agree within their strikes' scatter the day variance ends at zero, and statsmodels
-    warns on its way there: an answer here, not a failure; a result that is not finite is."""
+    warns on its way there and in its standard errors: an answer here, not a failure; a
+    result that is not finite is."""
     from statsmodels.regression.mixed_linear_model import MixedLM
     with warnings.catch_warnings():
         warnings.simplefilter('ignore')     # ConvergenceWarning, SingularMatrixWarning, ...
         result = MixedLM(y, exog, groups=units).fit(reml=True)
-    estimates = np.concatenate([np.ravel(result.fe_params), np.ravel(result.bse_fe),
-                                np.ravel(result.cov_re), [result.scale]])
+        fit = _MixedFit(np.ravel(result.fe_params), np.ravel(result.bse_fe),
+                        float(result.cov_re[0, 0]), float(np.ravel(result.bse_re)[0]),
+                        float(result.scale))
+    estimates = np.concatenate([fit.means, fit.mean_std_errors, [fit.day_var, fit.strike_var]])
     if not np.isfinite(estimates).all():
-        raise ValueError(f'the mixed model over {len(y)} strikes of {len(set(units))} days did '
-                         f'not converge to finite estimates')
-    return result
+        raise IdentificationError(f'the mixed model over {len(y)} strikes of '
+                                  f'{len(set(units))} days did not converge to finite '
+                                  f'estimates')
+    return fit
 
 
 def _sd_std_error(sd: float, variance_std_error: float) -> float:
-    """The standard error of a standard deviation from its variance's (delta method)."""
+    """The standard error of a standard deviation from its variance's (delta method); NaN
+    where the variance ended at zero, its bound, where no such error means anything."""
     if sd > 0:
         return variance_std_error / (2.0 * sd)
-    return math.sqrt(max(variance_std_error, 0.0))
+    return math.nan
 
 
 def discrepancies(latents: Sequence[StrikeLatent]) -> tuple:
     """The Discrepancy of each metric (module docstring, 3), the same for every group."""
     used = [x for x in latents if x.simulated.status == 'strike']
     out = []
-    for metric in MEASURED:
+    for metric in METRICS:
         rows = [(x.correction(metric), f'{x.strike.group}#{x.strike.recording_day}')
                 for x in used]
         rows = [(c, unit) for c, unit in rows if math.isfinite(c)]
@@ -161,10 +179,9 @@ def discrepancies(latents: Sequence[StrikeLatent]) -> tuple:
         if y.size and np.ptp(y) == 0:       # the physics matches every strike alike
             out.append(Discrepancy(metric, float(y[0]), 0.0, 0.0))
             continue
-        result = _mixed_model(y, np.ones((y.size, 1)), [u for _, u in rows])
-        day_var = max(float(result.cov_re[0, 0]), 0.0)
-        out.append(Discrepancy(metric, float(result.fe_params[0]), float(result.bse_fe[0]),
-                               math.sqrt(day_var + float(result.scale))))
+        fit = _mixed_model(y, np.ones((y.size, 1)), [u for _, u in rows])
+        out.append(Discrepancy(metric, float(fit.means[0]), float(fit.mean_std_errors[0]),
+                               math.sqrt(max(fit.day_var, 0.0) + fit.strike_var)))
     return tuple(out)
 
 
@@ -208,9 +225,9 @@ def _nearest_correlation(corr: np.ndarray) -> np.ndarray:
 def climatology(strikes: Sequence[RealStrike], group: str) -> dict:
     """The group's measured values: the forecast that quotes the lab's past strikes."""
     out = {}
-    for metric, attribute in MEASURED.items():
-        out[metric] = tuple(float(getattr(s, attribute)) for s in strikes
-                            if s.group == group and getattr(s, attribute) is not None)
+    for metric in METRICS:
+        out[metric] = tuple(float(getattr(s, metric)) for s in strikes
+                            if s.group == group and getattr(s, metric) is not None)
     return out
 
 
@@ -239,8 +256,8 @@ def spreads_from(latents: Sequence[StrikeLatent], scenes: dict[str, Scene],
     errors = discrepancies(latents)
     missing = sorted(set(scenes) - set(model.means))
     if missing:
-        raise ValueError(f'no strike of {", ".join(missing)} struck at its own latent: no '
-                         f'spread for it')
+        raise IdentificationError(f'no strike of {", ".join(missing)} struck at its own '
+                                  f'latent: no spread for it')
     strikes = [x.strike for x in latents]
     provenance = {
         'fitted_by': 'mantis identify --spread',

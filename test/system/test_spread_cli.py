@@ -163,3 +163,15 @@ def test_compare_writes_into_compare_here_unless_told(tmp_path, monkeypatch, cap
                    '--spread', '2', '--workers', '0']) == 0
     assert (tmp_path / 'compare' / 'predictions.csv').exists()
     assert 'outputs: compare/errors.csv' in capsys.readouterr().out
+
+
+def test_identify_refuses_a_spread_from_one_day(tmp_path, capsys):
+    lines = data_file(TABLE).read_text().splitlines()
+    one_day = [lines[0]] + [line for line in lines[1:] if ',011620,' in line]
+    table = tmp_path / 'one_day.csv'
+    table.write_text('\n'.join(one_day) + '\n')
+    code = mantis(['identify', '--strikes', str(table), '--spread', '--out',
+                   str(tmp_path / 'scenes'), '--workers', '0'])
+    assert code == 2
+    assert 'the spread needs strikes of at least two recording days' in capsys.readouterr().err
+    assert not (tmp_path / 'scenes').exists()

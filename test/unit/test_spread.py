@@ -14,6 +14,7 @@ from mantis_sim.scene import load_scene, scene_from_dict
 from mantis_sim.spread import QUANTILE_LEVELS, Spread, crps, pit, quantiles
 from mantis_sim.studies import forecast, spread_fit
 from mantis_sim.studies.fidelity import SimulatedStrike
+from mantis_sim.studies.identify import IdentificationError
 from mantis_sim.studies.strikes import RealStrike
 
 GROUPS = ('air_19mm', 'air_23mm', 'water_23mm')
@@ -242,7 +243,7 @@ def test_the_spread_needs_more_than_one_day():
     strikes = [_strike(i) for i in range(3)]
     strikes = [RealStrike(s.trial, 'air', 23.0, 3.0, 2.3, 'one day', 26.0, 100.0)
                for s in strikes]
-    with pytest.raises(ValueError, match='at least two recording days'):
+    with pytest.raises(IdentificationError, match='at least two recording days'):
         spread_fit.latent_model([_latent(s, 1.0) for s in strikes], 'geometry.latch_offset_deg')
 
 
@@ -262,5 +263,14 @@ def test_a_session_draws_its_day_once_and_where_the_arm_sits_at_each_latching():
     # the world strikes each latching with its own robot
     world = World(robots(1), relatch_scene=robots)
     assert world.scene.geometry.latch_offset_deg == offsets[0]
-    with pytest.raises(ValueError, match='has no spread'):
+    with pytest.raises(ParameterError, match='has no spread'):
         SessionRobots(load_scene('reference_air_23mm'), 1)
+
+
+def test_days_that_agree_end_the_day_scatter_at_zero_with_no_standard_error():
+    latents = [_latent(RealStrike(f'{d}-{k}', 'water', 23.0, 3.0, 2.3, f'day{d}', 4.6, 100.0),
+                       v)
+               for d in range(2) for k, v in enumerate((-1.0, 0.2, 1.0))]      # equal days
+    model = spread_fit.latent_model(latents, 'geometry.latch_offset_deg')
+    assert model.day_sd == 0.0 and math.isnan(model.day_sd_std_error)
+    assert model.strike_sd > 0.5
