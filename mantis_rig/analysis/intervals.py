@@ -31,7 +31,7 @@ import numpy as np
 
 from mantis_sim.errors import InputError
 
-from .kinematics import STRIKE_SPEED_SHARE, JointAngles, coordinate_resolution_mm, fit_linkage
+from .kinematics import STRIKE_SPEED_SHARE, JointAngles, coordinate_resolution_mm
 from .report import AnalysisParams, TrialAnalysis, analyze_linkage, analyze_tracks
 from .tracking import MarkerTracks
 
@@ -89,8 +89,7 @@ def track_intervals(tracks: MarkerTracks, params: AnalysisParams, result: TrialA
         failed += summary is None
         if summary is not None:
             noisy.append(summary)
-    offset = params.arm_axis_offset_rad
-    linkage, angles = fit_linkage(tracks, 0.0 if offset is None else offset)
+    linkage, angles = result.linkage, result.angles      # the trial's own fit
     chosen = []
     for run in _choices(tracks, params, linkage, angles):
         summary = _summary_or_none(run)
@@ -124,13 +123,13 @@ def _tracked_again(tracks: MarkerTracks, rng: np.random.Generator,
                    step_mm: float) -> MarkerTracks:
     """The markers as the tracker might have reported them once more: each position moved by
     its jitter and rounded to the tracker's step again (a lost position stays lost)."""
+    if not step_mm > 0:         # positions on no grid: no step to scale the jitter by
+        raise InputError('--intervals: the tracks\' positions show no tracker step, which '
+                         'sets the size of the re-tracking\'s jitter')
     moved = {}
     for name, xy in tracks.markers_mm.items():
-        if step_mm > 0:
-            steps = np.round(xy / step_mm + rng.normal(0.0, retrack_sd_steps(), xy.shape))
-            moved[name] = steps * step_mm
-        else:
-            moved[name] = xy + rng.normal(0.0, TRACKING_NOISE_STEPS, xy.shape)
+        steps = np.round(xy / step_mm + rng.normal(0.0, retrack_sd_steps(), xy.shape))
+        moved[name] = steps * step_mm
     return replace(tracks, markers_mm=moved)
 
 

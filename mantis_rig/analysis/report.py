@@ -105,6 +105,7 @@ class TrialAnalysis:
     peak_tip_speed: float = float('nan')         # m/s, at the sub-frame maximum
     strike_half_width: int = 0                  # frames, of the strike's polynomial fits
     linkage: LinkageFit | None = None
+    angles: JointAngles | None = None           # the linkage's joint angles, as fitted
     body_pivot_mm: np.ndarray | None = None     # in AnalysisParams.pivot_frame
     overcentering_method: str = 'tendon geometry'   # or 'trajectory knee'
     lost_frames_in_strike: int = 0                  # gaps (lost markers) in phase IV
@@ -157,7 +158,7 @@ def analyze_linkage(tracks: MarkerTracks, linkage: LinkageFit, angles: JointAngl
     result = _analyze(angles.time_s, theta1, angles.theta3_rad, linkage.L1_mm, params,
                       linkage.angle_noise_floor_rad, body_raw=body,
                       body_floor_rad=linkage.body_noise_floor_rad)
-    result.linkage = linkage
+    result.linkage, result.angles = linkage, angles
     result.body_pivot_mm = pivot_in_frame(linkage.body_pivot_mm, tracks.handedness,
                                           params.pivot_frame)
     result.lost_frames_in_strike = check_strike_tracked(result, tracks.time_s)

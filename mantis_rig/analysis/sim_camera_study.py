@@ -154,10 +154,11 @@ def interval_coverage(scene_name: str = 'air_23mm_rig', films: int = 20,
         tracks = film(world, scene.camera.frame_rate_hz, k / films)
         result = analyze_tracks(tracks, params)
         found = track_intervals(tracks, params, result, replicas, seed=k)
+        summary = result.summary()
         for key, interval in found.quantities.items():
             held[key] += interval.holds(true[key])
             widths[key].append(interval.high - interval.low)
-            errors[key].append(value_of(result.summary(), key) - true[key])
+            errors[key].append(value_of(summary, key) - true[key])
     return IntervalCoverage(films, replicas, held,
                             {k: float(np.median(v)) for k, v in widths.items()},
                             {k: float(np.median(v)) for k, v in errors.items()})

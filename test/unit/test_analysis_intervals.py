@@ -6,6 +6,7 @@ import pytest
 
 from mantis_rig.analysis.intervals import _interval, _tracked_again
 from mantis_rig.analysis.tracking import MarkerTracks
+from mantis_sim.errors import InputError
 
 
 def test_the_interval_reflects_the_deviations_and_holds_every_choice():
@@ -36,3 +37,5 @@ def test_a_re_tracking_keeps_the_step_and_the_lost_positions():
     # moved by as much as tracking moves a position: rounding (1/12) and jitter (0.3 steps)
     deviation = np.delete(moved - xy, 10, axis=0) / 0.017
     assert np.mean(deviation ** 2) == pytest.approx(1 / 12 + 0.09, rel=0.25)
+    with pytest.raises(InputError, match='show no tracker step'):
+        _tracked_again(tracks, np.random.default_rng(2), 0.0)
