@@ -82,9 +82,6 @@ class Draws:
     values: list            # [{key: value}] one per robot
     factors: dict           # metric -> ndarray (N,) to multiply the simulated metric by
 
-    def __len__(self) -> int:
-        return len(self.values)
-
 
 @dataclass(frozen=True)
 class Spread:
@@ -125,11 +122,9 @@ class Spread:
                                          p.upper)
         if self.latent is not None:
             lat = self.latent
-            day_sd = lat.day_sd
-            if math.isfinite(lat.day_dof):
-                day_sd = lat.day_sd * math.sqrt(lat.day_dof / rng.chisquare(lat.day_dof))
+            day_sd = float(self._day_sds(1, rng)[0])
             latent = replace(lat, mean=float(rng.normal(lat.mean, lat.mean_std_error)),
-                             mean_std_error=0.0, day_sd=float(day_sd), day_dof=math.inf)
+                             mean_std_error=0.0, day_sd=day_sd, day_dof=math.inf)
         discrepancy = tuple(replace(d, bias=float(rng.normal(d.bias, d.bias_std_error)),
                                     bias_std_error=0.0) for d in self.discrepancy)
         return replace(self, latent=latent, parameters=parameters, discrepancy=discrepancy)
@@ -158,12 +153,18 @@ class Spread:
                       contact_angle_deg: float) -> np.ndarray:
         lat = self.latent
         lower, upper = self.latent_range(contact_angle_deg)
-        day_sd = lat.day_sd
-        if math.isfinite(lat.day_dof):
-            day_sd = lat.day_sd * np.sqrt(lat.day_dof / rng.chisquare(lat.day_dof, n))
+        day_sd = self._day_sds(n, rng)
         out = (rng.normal(lat.mean, lat.mean_std_error, n) + rng.normal(0.0, 1.0, n) * day_sd
                + rng.normal(0.0, lat.strike_sd, n))
         return np.clip(out, lower, upper)
+
+    def _day_sds(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """N draws of the day scatter from its uncertainty: a scaled inverse chi-square on its
+        degrees of freedom (the fitted value itself where they are infinite)."""
+        lat = self.latent
+        if not math.isfinite(lat.day_dof):
+            return np.full(n, lat.day_sd)
+        return lat.day_sd * np.sqrt(lat.day_dof / rng.chisquare(lat.day_dof, n))
 
     def to_mapping(self) -> dict:
         """The scene file's `spread` section (from_mapping reads it back)."""

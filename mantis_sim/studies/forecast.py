@@ -23,11 +23,9 @@ import numpy as np
 from mantis_sim.robots import scene_spread
 from mantis_sim.scene import Scene
 from mantis_sim.spread import (
-    QUANTILE_LEVELS,
     Spread,
     crps,
     pit,
-    quantile_label,
     quantiles,
 )
 
@@ -161,9 +159,6 @@ def left_out_days(scenes: dict[str, Scene], latents: Sequence, param, n: int, se
     return out
 
 
-def quantile_columns(stem: str) -> list[str]:
-    return [f'{stem}_{quantile_label(q)}' for q in QUANTILE_LEVELS]
-
 
 __all__ = ['FORECAST_METRICS', 'INTERVALS', 'StrikeForecast', 'forecast_strikes', 'left_out_days',
-           'prediction_rows', 'quantile_columns', 'scene_spread', 'scores', 'strike_rng']
+           'prediction_rows', 'scores', 'strike_rng']

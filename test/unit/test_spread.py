@@ -202,8 +202,8 @@ def test_prediction_rows_have_the_columns_a_lab_reads():
                                             'spring_energy_mJ': np.full(50, np.nan)}, 50, {})
     row = forecast.prediction_rows([f])[0]
     assert list(row)[:4] == ['trial', 'group', 'tip_speed_mps_measured', 'tip_speed_mps_q05']
-    assert [k for k in row if k.startswith('spring_energy_mJ_q')] == forecast.quantile_columns(
-        'spring_energy_mJ')
+    assert [k for k in row if k.startswith('spring_energy_mJ_q')] == [
+        f'spring_energy_mJ_q{5 * k:02d}' for k in range(1, 20)]
     assert row['tip_speed_mps_q50'] == pytest.approx(25.0)
     assert math.isnan(row['spring_energy_mJ_q50']) and row['robots_not_struck'] == 50
 
