@@ -6,6 +6,7 @@ results, each row's derived values run compiled.
 """
 from __future__ import annotations
 
+import contextlib
 import math
 
 import numpy as np
@@ -13,6 +14,23 @@ import numpy as np
 from . import equations as eq
 from . import layout
 from .radau import EVENT, OVER_BUDGET, STEP_TOO_SMALL, integrate
+
+
+@contextlib.contextmanager
+def interruptible():
+    """Around a compiled call: a Ctrl-C that lands while it runs comes back from numba's
+    dispatcher as a SystemError ("returned a result with an exception set"), caused, through
+    as many such SystemErrors as the dispatcher nests, by the KeyboardInterrupt; it is raised
+    as the KeyboardInterrupt it is, which every command answers with one line."""
+    try:
+        yield
+    except SystemError as exc:
+        cause = exc.__cause__
+        while isinstance(cause, SystemError):
+            cause = cause.__cause__
+        if isinstance(cause, KeyboardInterrupt):
+            raise KeyboardInterrupt from None
+        raise
 
 
 class SegmentFailed(RuntimeError):
@@ -57,13 +75,15 @@ class FastSegments:
         vector = mode_vector(mode)
         kinds, directions, constants = self._spec_arrays(specs)
         try:
-            status, event, ts, ys, hs, qs = integrate(
-                y0, t0, t1, rtol, np.asarray(atol, dtype=float), vector, p, knots, kinds,
-                directions, constants, max_rhs_evals, ws, dense)
+            with interruptible():
+                status, event, ts, ys, hs, qs = integrate(
+                    y0, t0, t1, rtol, np.asarray(atol, dtype=float), vector, p, knots, kinds,
+                    directions, constants, max_rhs_evals, ws, dense)
             if status in (STEP_TOO_SMALL, OVER_BUDGET):
                 raise SegmentFailed(float(ts[-1]), status == OVER_BUDGET)
             ws[eq.WS_THETA1_GUESS] = start_theta1
-            states = eq.full_states(ts, ys, vector, p, knots, ws)
+            with interruptible():
+                states = eq.full_states(ts, ys, vector, p, knots, ws)
         finally:
             model.rhs_evals = int(ws[eq.WS_RHS_EVALS])
             model.theta1_guess = float(ws[eq.WS_THETA1_GUESS])
@@ -75,8 +95,9 @@ class FastSegments:
         p, knots = self.params()
         out = np.empty(eq.DYN_SIZE)
         self._ws[eq.WS_RHS_EVALS] = self.model.rhs_evals
-        eq.state_dynamics(float(t), np.asarray(s, dtype=float), mode_vector(mode), p, knots,
-                          self._ws, out)
+        with interruptible():
+            eq.state_dynamics(float(t), np.asarray(s, dtype=float), mode_vector(mode), p,
+                              knots, self._ws, out)
         self.model.rhs_evals = int(self._ws[eq.WS_RHS_EVALS])
         return out.tolist()
 
@@ -98,9 +119,10 @@ class FastSegments:
         p, knots = self.params()
         times = segment.t if times is None else times
         states = segment.states if states is None else states
-        return eq.observe_rows(np.asarray(times, dtype=float),
-                               np.ascontiguousarray(states, dtype=float),
-                               mode_vector(segment), p, knots, self._ws)
+        with interruptible():
+            return eq.observe_rows(np.asarray(times, dtype=float),
+                                   np.ascontiguousarray(states, dtype=float),
+                                   mode_vector(segment), p, knots, self._ws)
 
     def states_at(self, mode, interpolant, start_theta1: float, times) -> np.ndarray:
         """Full states (rows) at times along a segment's dense output (a held arm on a taut
@@ -109,7 +131,8 @@ class FastSegments:
         times = np.atleast_1d(np.asarray(times, dtype=float))
         packed = np.ascontiguousarray(interpolant(times).T.reshape(times.size, -1))
         self._ws[eq.WS_THETA1_GUESS] = start_theta1
-        return eq.full_states(times, packed, mode_vector(mode), p, knots, self._ws)
+        with interruptible():
+            return eq.full_states(times, packed, mode_vector(mode), p, knots, self._ws)
 
 
 class DenseSteps:

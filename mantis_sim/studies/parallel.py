@@ -54,8 +54,21 @@ def connect(scheduler: str | None, workers: int | None):
     engine loaded (or compiled, the first time on its machine) before any work is timed."""
     from mantis_sim.fast import warm_up
     client, cluster, where = _connect(scheduler, workers)
+    if cluster is not None:
+        client.run(_leave_interrupts_to_the_parent)
     client.run(warm_up)
     return client, cluster, where
+
+
+def _leave_interrupts_to_the_parent() -> None:
+    """A local cluster's workers share the terminal's Ctrl-C with the command that started
+    them, and each printed a KeyboardInterrupt traceback beside its one line; they ignore it
+    instead, and the command closes the cluster as it stops."""
+    import signal
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:          # not the worker's main thread: leave it as it is
+        pass
 
 
 def _connect(scheduler: str | None, workers: int | None):

@@ -172,3 +172,24 @@ def test_a_tendon_too_stiff_to_show_is_solved_in_its_rigid_limit(overrides, limi
             *overrides, 'integration.rigid_tendon_below=0'])).metrics
         assert result.metrics['peak_tip_speed_mps'] == pytest.approx(
             resolved['peak_tip_speed_mps'], rel=1e-4)
+
+
+def test_a_ctrl_c_inside_a_compiled_call_is_the_keyboard_interrupt():
+    """numba hands a Ctrl-C back as SystemErrors nested around the KeyboardInterrupt."""
+    from mantis_sim.fast.segment import interruptible
+
+    def nested():
+        try:
+            try:
+                raise KeyboardInterrupt
+            except KeyboardInterrupt as exc:
+                raise SystemError('returned a result with an exception set') from exc
+        except SystemError as exc:
+            raise SystemError('returned a result with an exception set') from exc
+
+    with pytest.raises(KeyboardInterrupt):
+        with interruptible():
+            nested()
+    with pytest.raises(SystemError, match='a bug'):
+        with interruptible():
+            raise SystemError('a bug')
