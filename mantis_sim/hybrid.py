@@ -740,7 +740,19 @@ class _DenseSegment:
         if self.sim.fast is not None:
             return self.sim.fast.states_at(self.mode, self.interpolant, self.start_theta1,
                                            times_ms)
+        if self.sim._constrained(self.mode):
+            return self._held_states(times_ms)
         return np.array([self(t) for t in times_ms], dtype=float).reshape(-1, 6)
+
+    def _held_states(self, times_ms) -> np.ndarray:
+        # The pose follows from the stage alone: no state-by-state dynamics, one call of the
+        # interpolant for the integrated energies.
+        times_ms = np.atleast_1d(np.asarray(times_ms, dtype=float))
+        th1, w1 = self.sim.model.held_pose(times_ms, self.mode.stuck_at, self.start_theta1)
+        th3 = self.sim.model.contact_angle if self.mode.stuck_at is None else self.mode.stuck_at
+        stage_work, loss = np.asarray(self.interpolant(times_ms)).reshape(2, -1)
+        zeros = np.zeros(times_ms.size)
+        return np.column_stack([th1, np.full(times_ms.size, th3), w1, zeros, stage_work, loss])
 
     def angles(self, times_ms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(theta1, theta3) at many times: with the arm free the integrated state starts with

@@ -15,6 +15,8 @@ from __future__ import annotations
 import math
 from typing import NamedTuple, Optional
 
+import numpy as np
+
 from .drive import make_drive
 from .forces import (
     FluidDrag,
@@ -230,6 +232,25 @@ class Model:
         return d.contact_torque_Nmm + self.friction_limit(d)
 
     # --- helpers --------------------------------------------------------------------------------
+    def held_pose(self, times_ms, th3: Optional[float],
+                  start_theta1: float) -> tuple[np.ndarray, np.ndarray]:
+        """(theta1, omega1) of the arm held at th3 (default: the contact) on a taut rigid
+        tendon at each time: latched_constrained's kinematics without its forces, which follow
+        from the stage alone. Newton starts from start_theta1 (the root the segment followed),
+        then from the time before; the guess the integrator shares is left as it was."""
+        th3 = self.contact_angle if th3 is None else th3
+        times_ms = np.asarray(times_ms, dtype=float)
+        th1, w1 = np.empty(times_ms.size), np.empty(times_ms.size)
+        saved, self.theta1_guess = self.theta1_guess, start_theta1
+        try:
+            for i, t in enumerate(times_ms.tolist()):
+                l_free, l_free_dot, _ = self.free_length(t)
+                th1[i], tg = self.solve_theta1(l_free, th3)
+                w1[i] = l_free_dot / tg.d1
+        finally:
+            self.theta1_guess = saved
+        return th1, w1
+
     def solve_theta1(self, l_target: float, th3: float):
         """(theta1, its TendonGeometry) with l_t(theta1, th3) = l_target, by Newton from the
         last solution. The geometry of the converged iterate is returned with it, so the

@@ -69,6 +69,21 @@ def test_tension_matches_the_batch_trajectory(rig_world):
     assert peak == pytest.approx(traj.tendon_force_N[strike].max(), rel=1e-3)
 
 
+def test_the_held_arms_states_at_many_times_are_its_dynamics_at_each(rig_world):
+    """Held on a taut rigid tendon, the pose follows from the stage alone: the states the
+    camera and the load cell read at many times at once are the model's, state by state."""
+    sim = rig_world._current.sim
+    held = [seg for seg in sim.run_data.segments
+            if seg.dense is not None and sim._constrained(seg.dense.mode)]
+    assert len(held) > 10
+    for seg in held[::10]:
+        times_ms = np.linspace(seg.t[0], seg.t[-1], 5)
+        one_by_one = np.array([seg.dense(t) for t in times_ms])
+        guess = sim.model.theta1_guess
+        assert np.allclose(seg.dense.states(times_ms), one_by_one, rtol=0, atol=1e-12)
+        assert sim.model.theta1_guess == guess     # the integrator's own guess is kept
+
+
 def test_markers_move_as_two_rigid_bodies(rig_world):
     times = np.linspace(1.5, rig_world.peak_time_s + 0.005, 400)
     markers = rig_world.marker_positions_m(times)
