@@ -701,6 +701,9 @@ class HybridSimulator:
         """Tendon tension (N) at times within a segment simulated with dense output (at the
         full states there, if the caller has them)."""
         times = np.asarray(times, dtype=float)
+        if self.fast is None and states is None and self._constrained(segment.dense.mode):
+            return self.model.held_tensions(times, segment.dense.mode.stuck_at,
+                                            segment.dense.start_theta1)
         if states is None:
             states = segment.dense.states(times)
         if self.fast is not None:
@@ -749,10 +752,14 @@ class _DenseSegment:
         # interpolant for the integrated energies.
         times_ms = np.atleast_1d(np.asarray(times_ms, dtype=float))
         th1, w1 = self.sim.model.held_pose(times_ms, self.mode.stuck_at, self.start_theta1)
-        th3 = self.sim.model.contact_angle if self.mode.stuck_at is None else self.mode.stuck_at
         stage_work, loss = np.asarray(self.interpolant(times_ms)).reshape(2, -1)
         zeros = np.zeros(times_ms.size)
-        return np.column_stack([th1, np.full(times_ms.size, th3), w1, zeros, stage_work, loss])
+        return np.column_stack([th1, np.full(times_ms.size, self._held_th3()), w1, zeros,
+                                stage_work, loss])
+
+    def _held_th3(self) -> float:
+        stuck_at = self.mode.stuck_at
+        return self.sim.model.contact_angle if stuck_at is None else stuck_at
 
     def angles(self, times_ms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(theta1, theta3) at many times: with the arm free the integrated state starts with
@@ -760,5 +767,8 @@ class _DenseSegment:
         if not self.mode.latched:
             th1, th3 = self.interpolant(times_ms)[:2]
             return th1, th3
+        if self.sim.fast is None and self.sim._constrained(self.mode):
+            th1 = self.sim.model.held_pose(times_ms, self.mode.stuck_at, self.start_theta1)[0]
+            return th1, np.full(th1.size, self._held_th3())
         states = self.states(times_ms)
         return states[:, 0], states[:, 1]

@@ -12,6 +12,7 @@ Baumgarte correction). Its Jacobian grad l_t = (l_1, l_3) keeps full rank throug
 """
 from __future__ import annotations
 
+from contextlib import contextmanager
 import math
 from typing import NamedTuple, Optional
 
@@ -236,20 +237,32 @@ class Model:
                   start_theta1: float) -> tuple[np.ndarray, np.ndarray]:
         """(theta1, omega1) of the arm held at th3 (default: the contact) on a taut rigid
         tendon at each time: latched_constrained's kinematics without its forces, which follow
-        from the stage alone. Newton starts from start_theta1 (the root the segment followed),
-        then from the time before; the guess the integrator shares is left as it was."""
+        from the stage alone."""
         th3 = self.contact_angle if th3 is None else th3
         times_ms = np.asarray(times_ms, dtype=float)
         th1, w1 = np.empty(times_ms.size), np.empty(times_ms.size)
-        saved, self.theta1_guess = self.theta1_guess, start_theta1
-        try:
+        with self._newton_from(start_theta1):
             for i, t in enumerate(times_ms.tolist()):
                 l_free, l_free_dot, _ = self.free_length(t)
                 th1[i], tg = self.solve_theta1(l_free, th3)
                 w1[i] = l_free_dot / tg.d1
+        return th1, w1
+
+    def held_tensions(self, times_ms, th3: Optional[float], start_theta1: float) -> np.ndarray:
+        """The tendon tension (N) holding that arm at each time (latched_constrained's)."""
+        with self._newton_from(start_theta1):
+            return np.array([self.latched_constrained(t, th3).tension_N
+                             for t in np.asarray(times_ms, dtype=float).tolist()])
+
+    @contextmanager
+    def _newton_from(self, start_theta1: float):
+        """theta1's Newton starts from start_theta1 (the root a held segment followed), then
+        from the time before; the guess the integrator shares is left as it was."""
+        saved, self.theta1_guess = self.theta1_guess, start_theta1
+        try:
+            yield
         finally:
             self.theta1_guess = saved
-        return th1, w1
 
     def solve_theta1(self, l_target: float, th3: float):
         """(theta1, its TendonGeometry) with l_t(theta1, th3) = l_target, by Newton from the

@@ -79,8 +79,12 @@ def test_the_held_arms_states_at_many_times_are_its_dynamics_at_each(rig_world):
     for seg in held[::10]:
         times_ms = np.linspace(seg.t[0], seg.t[-1], 5)
         one_by_one = np.array([seg.dense(t) for t in times_ms])
+        tensions = [sim.dynamics_at(seg, t, s).tension_N for t, s in zip(times_ms, one_by_one)]
         guess = sim.model.theta1_guess
         assert np.allclose(seg.dense.states(times_ms), one_by_one, rtol=0, atol=1e-12)
+        assert np.allclose(np.column_stack(seg.dense.angles(times_ms)), one_by_one[:, :2],
+                           rtol=0, atol=1e-12)
+        assert np.allclose(sim.tensions_at(seg, times_ms), tensions, rtol=1e-10, atol=0)
         assert sim.model.theta1_guess == guess     # the integrator's own guess is kept
 
 
