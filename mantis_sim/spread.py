@@ -9,6 +9,9 @@ describes what differs between simulated robots of one design, each part drawn o
   strikes' own values). The mean is drawn within its standard error, and the day's standard
   deviation from its own uncertainty (a scaled inverse chi-square on the days' degrees of
   freedom: with a handful of days, a new day may lie further out than the fitted value says).
+  A strike of a recording day the fit has seen takes that day's assembly as the mixed model
+  predicts it from the day's strikes (`days`: its offset from the mean, and the standard
+  deviation of the day's level, mean + offset), not a new day's draw.
   A draw beyond the latch's range sits at its end: an arm cannot sit beyond the latch.
 - **the identified parameters**: multivariate normal about the scene's values, from their
   standard errors and correlations; draws outside a parameter's bounds are clipped to them.
@@ -22,7 +25,8 @@ which a spread is judged.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
 import math
 from typing import Optional
 
@@ -43,6 +47,14 @@ def quantile_label(level: float) -> str:
     return f'q{round(100 * level):02d}'
 
 
+def _scatter_sds(sd: float, dof: float, n: int, rng: np.random.Generator) -> np.ndarray:
+    """N draws of a fitted standard deviation from its uncertainty: a scaled inverse chi-square
+    on its degrees of freedom (the fitted value itself where they are infinite)."""
+    if not math.isfinite(dof):
+        return np.full(n, sd)
+    return sd * np.sqrt(dof / rng.chisquare(dof, n))
+
+
 @dataclass(frozen=True)
 class Latent:
     """A strike's own value of a scene key: mean + day + strike, each normal (units of key)."""
@@ -54,6 +66,10 @@ class Latent:
     lower: float        # the draws' range (the key's valid values for the scene's geometry)
     upper: float
     day_dof: float = math.inf   # the degrees of freedom of the day variance (days - groups)
+    strike_dof: float = math.inf    # those of the within-day variance (strikes - days)
+    #: recording day -> (its assembly's offset from the mean, the sd of its level, mean +
+    #: offset, the mean's own error included), for the days the fit has seen
+    days: Mapping[str, tuple[float, float]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -91,9 +107,12 @@ class Spread:
     climatology: dict       # metric -> tuple of the group's measured values
     provenance: dict
 
-    def draw(self, n: int, rng: np.random.Generator, contact_angle_deg: float = 0.0) -> Draws:
+    def draw(self, n: int, rng: np.random.Generator, contact_angle_deg: float = 0.0,
+             day: Optional[str] = None) -> Draws:
         """N robots. ``contact_angle_deg``: the design's, which bounds the latched arm angle
-        (contact angle + latch offset in [0, 15] degrees) when the latent is that offset."""
+        (contact angle + latch offset in [0, 15] degrees) when the latent is that offset.
+        ``day``: the recording day the strikes belong to; one the spread has seen gives them
+        its assembly, any other a new day's."""
         if n < 1:
             raise ParameterError(f'a spread needs at least one robot, got {n}')
         values = [{} for _ in range(n)]
@@ -101,7 +120,7 @@ class Spread:
             for row, draw in zip(values, self._parameter_draws(n, rng)):
                 row.update(zip(self.parameters.keys, map(float, draw)))
         if self.latent is not None:
-            for row, value in zip(values, self._latent_draws(n, rng, contact_angle_deg)):
+            for row, value in zip(values, self._latent_draws(n, rng, contact_angle_deg, day)):
                 row[self.latent.key] = float(value)
         factors = {}
         for d in self.discrepancy:
@@ -122,9 +141,11 @@ class Spread:
                                          p.upper)
         if self.latent is not None:
             lat = self.latent
-            day_sd = float(self._day_sds(1, rng)[0])
-            latent = replace(lat, mean=float(rng.normal(lat.mean, lat.mean_std_error)),
-                             mean_std_error=0.0, day_sd=day_sd, day_dof=math.inf)
+            day_sd = float(_scatter_sds(lat.day_sd, lat.day_dof, 1, rng)[0])
+            mean = float(rng.normal(lat.mean, lat.mean_std_error))
+            strike_sd = float(_scatter_sds(lat.strike_sd, lat.strike_dof, 1, rng)[0])
+            latent = replace(lat, mean=mean, mean_std_error=0.0, day_sd=day_sd,
+                             strike_sd=strike_sd, day_dof=math.inf, strike_dof=math.inf)
         discrepancy = tuple(replace(d, bias=float(rng.normal(d.bias, d.bias_std_error)),
                                     bias_std_error=0.0) for d in self.discrepancy)
         return replace(self, latent=latent, parameters=parameters, discrepancy=discrepancy)
@@ -149,22 +170,18 @@ class Spread:
                                  f'contact angle of {contact_angle_deg:g} degrees')
         return lower, upper
 
-    def _latent_draws(self, n: int, rng: np.random.Generator,
-                      contact_angle_deg: float) -> np.ndarray:
+    def _latent_draws(self, n: int, rng: np.random.Generator, contact_angle_deg: float,
+                      day: Optional[str] = None) -> np.ndarray:
         lat = self.latent
         lower, upper = self.latent_range(contact_angle_deg)
-        day_sd = self._day_sds(n, rng)
-        out = (rng.normal(lat.mean, lat.mean_std_error, n) + rng.normal(0.0, 1.0, n) * day_sd
-               + rng.normal(0.0, lat.strike_sd, n))
-        return np.clip(out, lower, upper)
-
-    def _day_sds(self, n: int, rng: np.random.Generator) -> np.ndarray:
-        """N draws of the day scatter from its uncertainty: a scaled inverse chi-square on its
-        degrees of freedom (the fitted value itself where they are infinite)."""
-        lat = self.latent
-        if not math.isfinite(lat.day_dof):
-            return np.full(n, lat.day_sd)
-        return lat.day_sd * np.sqrt(lat.day_dof / rng.chisquare(lat.day_dof, n))
+        if day in lat.days:
+            offset, level_sd = lat.days[day]
+            level = rng.normal(lat.mean + offset, level_sd, n)
+        else:
+            level = (rng.normal(lat.mean, lat.mean_std_error, n)
+                     + rng.normal(0.0, 1.0, n) * _scatter_sds(lat.day_sd, lat.day_dof, n, rng))
+        strike = rng.normal(0.0, 1.0, n) * _scatter_sds(lat.strike_sd, lat.strike_dof, n, rng)
+        return np.clip(level + strike, lower, upper)
 
     def to_mapping(self) -> dict:
         """The scene file's `spread` section (from_mapping reads it back)."""
@@ -175,7 +192,10 @@ class Spread:
                              'mean_std_error': _sig(lat.mean_std_error),
                              'day_sd': _sig(lat.day_sd), 'strike_sd': _sig(lat.strike_sd),
                              'range': [_sig(lat.lower), _sig(lat.upper)],
-                             'day_dof': _sig(lat.day_dof)}
+                             'day_dof': _sig(lat.day_dof), 'strike_dof': _sig(lat.strike_dof)}
+            if lat.days:
+                out['latent']['days'] = {day: {'offset': _sig(effect), 'sd': _sig(sd)}
+                                         for day, (effect, sd) in lat.days.items()}
         if self.parameters is not None:
             p = self.parameters
             sd = np.sqrt(np.diag(p.covariance))
@@ -273,14 +293,35 @@ def _latent(data, where: str) -> Optional[Latent]:
         raise ParameterError(f'{where}: spread: latent must be a mapping with key, mean, '
                              f'mean_std_error, day_sd, strike_sd and range')
     lower, upper = _span(data.get('range'), where, 'latent range')
-    dof = data.get('day_dof')
     return Latent(_scene_key(data['key'], where, 'latent key'),
                   _number(data.get('mean'), where, 'latent mean'),
                   _number(data.get('mean_std_error', 0.0), where, 'latent mean_std_error', 0.0),
                   _number(data.get('day_sd'), where, 'latent day_sd', 0.0),
                   _number(data.get('strike_sd'), where, 'latent strike_sd', 0.0), lower, upper,
-                  math.inf if dof is None or dof == math.inf
-                  else _number(dof, where, 'latent day_dof', 1.0))
+                  _dof(data.get('day_dof'), where, 'latent day_dof'),
+                  _dof(data.get('strike_dof'), where, 'latent strike_dof'),
+                  _days(_mapping(data.get('days'), where, 'latent days'), where))
+
+
+def _dof(value, where: str, name: str) -> float:
+    """Degrees of freedom: absent or .inf for a scatter taken as known."""
+    return math.inf if value is None or value == math.inf else _number(value, where, name, 1.0)
+
+
+def _days(data: dict, where: str) -> dict:
+    """latent.days: {recording day: {offset, sd}} (degrees, or the latent key's units)."""
+    out = {}
+    for day, entry in data.items():
+        if not isinstance(day, str):        # unquoted, 011620 would be read as octal 5008
+            raise ParameterError(f'{where}: spread: latent days: the recording day {day!r} '
+                                 f'must be a string (quote it)')
+        entry = _mapping(entry, where, f'latent days {day}')
+        if set(entry) != {'offset', 'sd'}:
+            raise ParameterError(f'{where}: spread: latent days {day} must be a mapping with '
+                                 f'offset and sd, got {entry!r}')
+        out[day] = (_number(entry['offset'], where, f'latent days {day} offset'),
+                    _number(entry['sd'], where, f'latent days {day} sd', 0.0))
+    return out
 
 
 def _parameters(data: dict, where: str) -> Optional[ParameterSpread]:

@@ -478,7 +478,8 @@ def _write_forecasts(forecasts, args, compare_plots) -> dict:
                 writer.writerow({'metric': metric, 'group': group, **entry})
     compare_plots.plot_forecasts(forecasts, args.out / 'forecasts.png')
     return {'robots_per_strike': args.spread, 'seed': args.seed, 'scores': scores,
-            'robots_not_struck': sum(f.not_struck for f in forecasts)}
+            'robots_not_struck': sum(f.not_struck for f in forecasts),
+            'strikes': len(forecasts), 'strikes_on_days_seen': sum(f.day_seen for f in forecasts)}
 
 
 def _forecast_lines(spread: dict) -> list[str]:
@@ -495,6 +496,9 @@ def _forecast_lines(spread: dict) -> list[str]:
                          f'{100 * e["coverage_80"]:3.0f} %  {e["crps"]:.3g} {unit} against '
                          f'{e["crps_climatology"]:.3g} ({e["crps_ratio"]:.2f}x)  '
                          f'{100 * e["median_abs_error_q50"]:.1f} %')
+    if spread['strikes_on_days_seen']:
+        lines.append(f'{spread["strikes_on_days_seen"]} of {spread["strikes"]} strikes are of '
+                     f'recording days the spread has seen: forecast from their day\'s assembly')
     if spread['robots_not_struck']:
         lines.append(f'{spread["robots_not_struck"]} drawn robots did not strike (left out of '
                      f'their forecasts)')

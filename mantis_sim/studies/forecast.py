@@ -1,7 +1,8 @@
 """Real strikes forecast from their scenes' spread, and how good the forecasts are.
 
 Each strike is simulated at its own conditions for N robots drawn from its group's spread
-(mantis_sim.spread); its forecast of a metric is the N simulated values, each times its
+(mantis_sim.spread), of its recording day's assembly where the spread has seen that day, else
+of a new day's; its forecast of a metric is the N simulated values, each times its
 discrepancy factor. A forecast is judged against the measured value by:
 
 - the coverage of its central 50 % and 80 % intervals (q25-q75, q10-q90);
@@ -44,6 +45,7 @@ class StrikeForecast:
     samples: dict           # metric -> ndarray (N,), NaN where a drawn robot did not strike
     not_struck: int
     climatology: dict       # metric -> the group's training values (the spread's)
+    day_seen: bool = False  # forecast from its recording day's assembly, which the spread knows
 
     def measured(self, metric: str) -> Optional[float]:
         return getattr(self.strike, metric)     # a RealStrike's measured value, or None
@@ -62,7 +64,8 @@ def forecast_strikes(scenes: dict[str, Scene], strikes: Sequence[RealStrike], n:
     spreads = spreads or {g: scene_spread(scene) for g, scene in scenes.items()}
     tasks, factors = [], []
     for i, strike in enumerate(strikes):
-        draws = spreads[strike.group].draw(n, strike_rng(seed, i), strike.contact_angle_deg)
+        draws = spreads[strike.group].draw(n, strike_rng(seed, i), strike.contact_angle_deg,
+                                           strike.recording_day)
         tasks += [(scenes[strike.group], strike, False, values) for values in draws.values]
         factors.append(draws.factors)
     simulated = mapper(simulate_task, tasks)
@@ -74,16 +77,18 @@ def forecast_strikes(scenes: dict[str, Scene], strikes: Sequence[RealStrike], n:
             values = np.array([getattr(s, metric) if s.status == 'strike' else math.nan
                                for s in sims])
             samples[metric] = values * factors[i].get(metric, 1.0)
+        spread = spreads[strike.group]
         out.append(StrikeForecast(strike, samples, sum(s.status != 'strike' for s in sims),
-                                   spreads[strike.group].climatology))
+                                  spread.climatology, day_seen(spread, strike)))
     return out
 
 
 def prediction_rows(forecasts: Sequence[StrikeForecast]) -> list[dict]:
-    """predictions.csv: trial, group, and per metric its measured value and q05..q95."""
+    """predictions.csv: trial, group, whether its day was seen, and per metric its measured
+    value and q05..q95."""
     rows = []
     for f in forecasts:
-        row = {'trial': f.strike.trial, 'group': f.strike.group}
+        row = {'trial': f.strike.trial, 'group': f.strike.group, 'day_seen': f.day_seen}
         for metric, (stem, _, _) in FORECAST_METRICS.items():
             measured = f.measured(metric)
             row[f'{stem}_measured'] = math.nan if measured is None else measured
@@ -159,6 +164,25 @@ def left_out_days(scenes: dict[str, Scene], latents: Sequence, param, n: int, se
     return out
 
 
+def left_out_strikes(scenes: dict[str, Scene], latents: Sequence, param, n: int, seed: int,
+                     mapper: Callable) -> list[StrikeForecast]:
+    """Every strike forecast by the spread fitted without it: a later strike of a day the
+    spread has seen, forecast from that day's other strikes (a day of one strike becomes a new
+    day). As left_out_days, the scenes' identified parameters stay fitted to every strike."""
+    from .spread_fit import spreads_from
+    out = []
+    for i, x in enumerate(latents):
+        kept = [other for j, other in enumerate(latents) if j != i]
+        group = x.strike.group
+        spreads, _ = spreads_from(kept, {group: scenes[group]}, param)
+        out += forecast_strikes(scenes, [x.strike], n, seed, mapper, spreads)
+    return out
 
-__all__ = ['FORECAST_METRICS', 'INTERVALS', 'StrikeForecast', 'forecast_strikes', 'left_out_days',
-           'prediction_rows', 'scores', 'strike_rng']
+
+def day_seen(spread: Spread, strike: RealStrike) -> bool:
+    """Whether the spread knows the strike's recording day (and forecasts from its assembly)."""
+    return spread.latent is not None and strike.recording_day in spread.latent.days
+
+
+__all__ = ['FORECAST_METRICS', 'INTERVALS', 'StrikeForecast', 'day_seen', 'forecast_strikes',
+           'left_out_days', 'left_out_strikes', 'prediction_rows', 'scores', 'strike_rng']

@@ -11,7 +11,9 @@
    are shared by the groups (a group has two to eight days: too few for its own). REML, since
    with so few days maximum likelihood would shrink the day variance by about 1/days. A
    strike's latent is an estimate: its own uncertainty is left inside the within-day scatter,
-   which makes the spread wider, not narrower.
+   which makes the spread wider, not narrower. Each training day's assembly is kept too, as
+   the model predicts it from the day's strikes (the random intercept's conditional mean and
+   standard deviation): a later strike of a day already seen is forecast from its day.
 3. **The discrepancy.** At its own latent each strike still misses in tip speed and in spring
    energy (one key cannot match both): measured / simulated - 1. A mixed model of the same
    form gives its mean (the bias, with its standard error) and its scatter between days and
@@ -25,8 +27,9 @@ The spread is fitted to all the training strikes of a group at once, never to on
 """
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 import math
 import warnings
@@ -83,11 +86,20 @@ class LatentModel:
     strike_sd_std_error: float
     days: int
     strikes: int
+    #: group -> {recording day: (its assembly's offset from the group's mean, the standard
+    #: deviation of the day's level, mean + offset)}: the day's random intercept as the mixed
+    #: model predicts it from the day's strikes (the BLUP, _day_levels)
+    day_effects: dict = field(default_factory=dict)
 
     @property
     def day_dof(self) -> int:
         """The day variance's degrees of freedom: days less the group means."""
         return max(self.days - len(self.means), 1)
+
+    @property
+    def strike_dof(self) -> int:
+        """The within-day variance's degrees of freedom: strikes less days."""
+        return max(self.strikes - self.days, 1)
 
 
 def strike_latents(scenes: dict[str, Scene], strikes: Sequence[RealStrike],
@@ -123,10 +135,31 @@ def latent_model(latents: Sequence[StrikeLatent], key: str) -> LatentModel:
     # REML ends the day variance at its bound, zero, only to within its optimiser's tolerance:
     # a day scatter under 3 % of the strikes' is taken as none
     day_sd = math.sqrt(fit.day_var) if fit.day_var > 1e-3 * fit.strike_var else 0.0
+    means = {g: (float(m), float(se)) for g, m, se in zip(groups, fit.means, fit.mean_std_errors)}
     return LatentModel(
-        key, {g: (float(m), float(se)) for g, m, se in zip(groups, fit.means, fit.mean_std_errors)},
-        day_sd, _sd_std_error(day_sd, fit.day_var_std_error), strike_sd,
-        strike_sd / math.sqrt(2.0 * within_dof), days, len(used))
+        key, means, day_sd, _sd_std_error(day_sd, fit.day_var_std_error), strike_sd,
+        strike_sd / math.sqrt(2.0 * within_dof), days, len(used),
+        _day_levels(used, fit, means, day_sd > 0))
+
+
+def _day_levels(used: Sequence[StrikeLatent], fit: _MixedFit, means: dict,
+                has_days: bool) -> dict:
+    """group -> {day: (offset, sd)}: each day's random intercept predicted from its m strikes
+    (its conditional mean and sd), and the sd of the day's level, mean + offset. The mean's
+    own error enters that level only by the share the day's strikes do not pin,
+    1 - day_var / (day_var + strike_var / m): a day of several strikes sits where they do
+    whatever the group's mean. Without a day variance every day sits at the mean."""
+    out: dict = {}
+    counts = Counter((x.strike.group, x.strike.recording_day) for x in used)
+    for (group, day), m in counts.items():
+        mean_se = means[group][1]
+        if not has_days:
+            out.setdefault(group, {})[day] = (0.0, mean_se)
+            continue
+        offset, offset_sd = fit.unit_effects[f'{group}#{day}']
+        unpinned = 1.0 - fit.day_var / (fit.day_var + fit.strike_var / m)
+        out.setdefault(group, {})[day] = (offset, math.hypot(offset_sd, unpinned * mean_se))
+    return out
 
 
 @dataclass(frozen=True)
@@ -136,6 +169,7 @@ class _MixedFit:
     day_var: float                  # the random intercept's variance
     day_var_std_error: float        # NaN where statsmodels gives none (the variance at zero)
     strike_var: float               # the residual variance
+    unit_effects: dict              # unit -> (its random intercept's conditional mean, sd)
 
 
 def _mixed_model(y: np.ndarray, exog: np.ndarray, units: list) -> _MixedFit:
@@ -148,9 +182,13 @@ def _mixed_model(y: np.ndarray, exog: np.ndarray, units: list) -> _MixedFit:
     with warnings.catch_warnings():
         warnings.simplefilter('ignore')     # ConvergenceWarning, SingularMatrixWarning, ...
         result = MixedLM(y, exog, groups=units).fit(reml=True)
+        effects = {unit: (float(np.ravel(mean)[0]),
+                          math.sqrt(max(float(np.ravel(result.random_effects_cov[unit])[0]),
+                                        0.0)))
+                   for unit, mean in result.random_effects.items()}
         fit = _MixedFit(np.ravel(result.fe_params), np.ravel(result.bse_fe),
                         float(result.cov_re[0, 0]), float(np.ravel(result.bse_re)[0]),
-                        float(result.scale))
+                        float(result.scale), effects)
     estimates = np.concatenate([fit.means, fit.mean_std_errors, [fit.day_var, fit.strike_var]])
     if not np.isfinite(estimates).all():
         raise IdentificationError(f'the mixed model over {len(y)} strikes of '
@@ -279,7 +317,8 @@ def spreads_from(latents: Sequence[StrikeLatent], scenes: dict[str, Scene],
         mean, mean_se = model.means[group]
         spreads[group] = Spread(
             Latent(param.key, mean, mean_se, model.day_sd, model.strike_sd, param.lower,
-                   param.upper, model.day_dof),
+                   param.upper, model.day_dof, model.strike_dof,
+                   model.day_effects.get(group, {})),
             parameter_spread(scene, group), errors, climatology(strikes, group),
             {**provenance, 'group_strikes': sum(s.group == group for s in strikes)})
     return spreads, model

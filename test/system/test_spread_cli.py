@@ -27,10 +27,13 @@ def test_compare_forecasts_each_strike_with_its_quantiles_and_scores_them(tmp_pa
     with open(tmp_path / 'a' / 'predictions.csv') as handle:
         rows = list(csv.DictReader(handle))
     assert len(rows) == 6 and {r['group'] for r in rows} == {'water_23mm'}
-    columns = ['trial', 'group']
+    columns = ['trial', 'group', 'day_seen']
     for stem in ('tip_speed_mps', 'spring_energy_mJ'):
         columns += [f'{stem}_measured'] + [f'{stem}_{q}' for q in LEVELS]
     assert list(rows[0]) == columns + ['robots_not_struck']
+    # the training strikes' days are the spread's own: each forecast from its day's assembly
+    assert {r['day_seen'] for r in rows} == {'True'}
+    assert report['spread']['strikes_on_days_seen'] == 6
     for row in rows:
         q = [float(row[f'tip_speed_mps_{level}']) for level in LEVELS]
         assert q == sorted(q) and 3.5 < q[9] < 6.0          # a strike in water: ~4.6 m/s

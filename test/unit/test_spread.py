@@ -23,7 +23,8 @@ GROUPS = ('air_19mm', 'air_23mm', 'water_23mm')
 def section(**changes) -> dict:
     """A valid spread section, with changes at dotted paths ('latent.day_sd': -1)."""
     doc = {'latent': {'key': 'geometry.latch_offset_deg', 'mean': 2.0, 'mean_std_error': 0.5,
-                      'day_sd': 3.0, 'strike_sd': 1.0, 'range': [-5.0, 12.0], 'day_dof': 10},
+                      'day_sd': 3.0, 'strike_sd': 1.0, 'range': [-5.0, 12.0], 'day_dof': 10,
+                      'days': {'0801319': {'offset': 5.0, 'sd': 0.5}}},
            'parameters': {'arm.blade_drag_broadside': {'value': 1.2, 'std_error': 0.1,
                                                        'bounds': [0.2, 8.0]},
                           'damping.body_Nmm_ms_per_rad': {'value': 0.0, 'std_error': 2.0,
@@ -71,6 +72,24 @@ def test_the_latent_scatters_by_day_and_strike_and_an_arm_stops_at_the_latch():
     assert np.mean(heavy == 12.0) > 2 * np.mean(offsets == 12.0)
 
 
+def test_a_strike_of_a_day_seen_sits_about_that_days_level():
+    spread = Spread.from_mapping(section(**{'latent.day_dof': None}), 'test')
+    def offsets(day, strike_dof=None):
+        s = spread if strike_dof is None else Spread.from_mapping(
+            section(**{'latent.day_dof': None, 'latent.strike_dof': strike_dof}), 'test')
+        return np.array([v['geometry.latch_offset_deg']
+                         for v in s.draw(20000, np.random.default_rng(4), 3.0, day).values])
+    seen = offsets('0801319')
+    # the day's level 2 + 5 within 0.5, a strike's scatter 1 about it
+    assert np.mean(seen) == pytest.approx(7.0, abs=0.03)
+    assert np.std(seen) == pytest.approx(math.hypot(0.5, 1.0), rel=0.03)
+    new_day = offsets('20261127')
+    assert np.median(new_day) == pytest.approx(2.0, abs=0.1) and np.std(new_day) > 2.5
+    # a within-day scatter fitted on few degrees of freedom has heavier tails
+    far = np.mean(np.abs(seen - 7.0) > 3.0)
+    assert np.mean(np.abs(offsets('0801319', 3) - 7.0) > 3.0) > 3 * far
+
+
 def test_parameters_keep_their_correlation_and_their_bounds():
     doc = section()
     doc['parameters']['damping.body_Nmm_ms_per_rad']['value'] = 5.0
@@ -103,6 +122,10 @@ def test_the_discrepancy_multiplies_about_its_bias():
     ({'correlation.arm.blade_drag_broadside': {'geometry.L2_mm': 0.3}},
      'both must be distinct parameters'),
     ({'parameters.arm.blade_drag_broadside.std_error': math.nan}, 'must be a finite number'),
+    ({'latent.days': {11620: {'offset': 1.0, 'sd': 0.5}}}, 'must be a string (quote it)'),
+    ({'latent.days': {'011620': {'offset': 1.0}}}, 'must be a mapping with offset and sd'),
+    ({'latent.days': {'011620': {'offset': 1.0, 'sd': -0.5}}}, 'sd = -0.5 must be a finite'),
+    ({'latent.strike_dof': 0.5}, 'latent strike_dof = 0.5 must be a finite number >= 1'),
 ])
 def test_a_broken_spread_is_refused_naming_what_is_wrong(changes, message):
     doc = section()
@@ -201,7 +224,8 @@ def test_prediction_rows_have_the_columns_a_lab_reads():
     f = forecast.StrikeForecast(_strike(0), {'peak_tip_speed_mps': np.linspace(20, 30, 50),
                                             'spring_energy_mJ': np.full(50, np.nan)}, 50, {})
     row = forecast.prediction_rows([f])[0]
-    assert list(row)[:4] == ['trial', 'group', 'tip_speed_mps_measured', 'tip_speed_mps_q05']
+    assert list(row)[:5] == ['trial', 'group', 'day_seen', 'tip_speed_mps_measured',
+                             'tip_speed_mps_q05']
     assert [k for k in row if k.startswith('spring_energy_mJ_q')] == [
         f'spring_energy_mJ_q{5 * k:02d}' for k in range(1, 20)]
     assert row['tip_speed_mps_q50'] == pytest.approx(25.0)
@@ -217,10 +241,11 @@ def _latent(strike, value, speed_error=0.0):
 
 def test_the_mixed_model_recovers_the_spread_between_and_within_days():
     rng = np.random.default_rng(6)
-    latents = []
+    latents, levels = [], {}
     for day in range(40):
         group = GROUPS[day % 2]
-        level = {'air_19mm': -1.0, 'air_23mm': 2.0}[group] + rng.normal(0.0, 3.0)
+        level = levels[f'day{day}'] = {'air_19mm': -1.0, 'air_23mm': 2.0}[group] + rng.normal(
+            0.0, 3.0)
         for k in range(4):
             strike = RealStrike(f'{day}-{k}', group.split('_')[0],
                                 19.0 if group == 'air_19mm' else 23.0, 3.0, 2.3, f'day{day}',
@@ -234,6 +259,14 @@ def test_the_mixed_model_recovers_the_spread_between_and_within_days():
     for group, truth in (('air_19mm', -1.0), ('air_23mm', 2.0)):
         mean, se = model.means[group]
         assert abs(mean - truth) < 2.5 * se and 0.5 < se < 1.2
+    # each day's level, mean + offset, from its four strikes: within about 1 / sqrt(4) of the
+    # strikes' scatter, the mean's error mostly pinned
+    z = []
+    for group, days in model.day_effects.items():
+        for day, (offset, sd) in days.items():
+            assert 0.45 < sd < 0.6
+            z.append((model.means[group][0] + offset - levels[day]) / sd)
+    assert len(z) == 40 and 0.5 < np.mean(np.square(z)) < 1.6     # chi-square/40: 1 +- 0.22
     speed = next(d for d in spread_fit.discrepancies(latents) if d.metric == 'peak_tip_speed_mps')
     assert abs(speed.bias) < 3 * speed.bias_std_error
     assert speed.sd == pytest.approx(0.03, rel=0.2)
