@@ -757,9 +757,9 @@ How many standard errors from zero the training strikes put each real effect: {i
 ## The spread
 Each prediction with its interval: the shipped scenes' spread (where the arm sits, by day and by
 strike; the identified parameters' uncertainty; the discrepancy; [spread.md](spread.md)),
-judged with each recording day left out, the design effects with their intervals, and the
-spread's own parameters with their standard errors: [spread_benchmark.md](spread_benchmark.md)
-(`bench/bench_spread.py`).
+judged with each recording day left out and with each strike left out (its day seen), the design
+effects with their intervals, and the spread's own parameters with their standard errors:
+[spread_benchmark.md](spread_benchmark.md) (`bench/bench_spread.py`).
 
 ## Strikes the model did not simulate to a strike
 {not_struck}
