@@ -71,10 +71,16 @@ def simulate_robot(task) -> dict:
     return out
 
 
-def design_spread(scene: Scene, n: int, seed: int, mapper: Callable) -> DesignSpread:
-    """N robots of the scene's design drawn from its spread, simulated through ``mapper``."""
-    draws = scene_spread(scene).draw(n, np.random.default_rng(seed),
-                                     scene.geometry.contact_angle_deg)
+def design_spread(scene: Scene, n: int, seed: int, mapper: Callable,
+                  day: str | None = None) -> DesignSpread:
+    """N robots of the scene's design drawn from its spread, simulated through ``mapper``; of
+    recording day ``day``'s assembly if given (one the spread has seen)."""
+    spread = scene_spread(scene)
+    if day is not None and (spread.latent is None or day not in spread.latent.days):
+        known = ', '.join(sorted(spread.latent.days)) if spread.latent is not None else ''
+        raise ParameterError(f'--day {day}: the spread of scene {scene.name} has not seen '
+                             f'that recording day (it knows: {known or "none"})')
+    draws = spread.draw(n, np.random.default_rng(seed), scene.geometry.contact_angle_deg, day)
     results = mapper(simulate_robot, [(scene, values) for values in draws.values])
     samples = {}
     for metric in DESIGN_METRICS:

@@ -33,6 +33,9 @@ def add_commands(commands) -> None:
                           f'the quantiles q05..q95 of each metric (N default {DEFAULT_ROBOTS})')
     sim.add_argument('--seed', type=int, default=1,
                      help='seed of the robots drawn by --spread (default 1)')
+    sim.add_argument('--day', metavar='RECORDING_DAY',
+                     help='with --spread: robots of this recording day\'s assembly, one the '
+                          'spread was fitted with (default: a new day\'s)')
     sim.set_defaults(run=run_sim)
 
     scenes = commands.add_parser('scenes', help='list scenes, effects and parameters')
@@ -73,6 +76,8 @@ def ceiling_warning(peak_force_n: float) -> list[str]:
 
 def run_sim(args) -> int:
     scene = _scene_from_args(args)
+    if args.day is not None and args.spread is None:
+        raise InputError('--day names the recording day of the robots --spread draws')
     if args.spread is not None:
         return _run_spread(args, scene)
     result = simulate(scene)
@@ -106,21 +111,23 @@ def _run_spread(args, scene) -> int:
         raise InputError(f'--spread: scene {scene.name} has no spread; fit one with `mantis '
                          f'identify --spread` (docs/spread.md)')
     with ClusterMap(workers=0, progress=not args.json, unit='robots') as mapper:
-        run = robots.design_spread(scene, args.spread, args.seed, mapper)
+        run = robots.design_spread(scene, args.spread, args.seed, mapper, args.day)
     table = run.quantiles()
     if args.json:
         print(json.dumps(json_safe({'scene': scene.name, 'robots': run.robots,
-                                    'seed': args.seed, 'not_struck': run.not_struck,
+                                    'seed': args.seed, 'day': args.day,
+                                    'not_struck': run.not_struck,
                                     'reasons_not_struck': list(run.reasons),
                                     'quantiles': table})))
         return 0
-    print(_spread_table(scene.name, run, table, args.seed))
+    print(_spread_table(scene.name, run, table, args.seed, args.day))
     return 0
 
 
-def _spread_table(name: str, run, table: dict, seed: int) -> str:
+def _spread_table(name: str, run, table: dict, seed: int, day: str | None) -> str:
     from mantis_sim.robots import DESIGN_METRICS
-    lines = [f'{name}: {run.robots} robots drawn from its spread (seed {seed}); '
+    of_day = f'recording day {day}\'s assembly' if day else 'a new day\'s assembly each'
+    lines = [f'{name}: {run.robots} robots drawn from its spread, {of_day} (seed {seed}); '
              f'{run.robots - run.not_struck} struck']
     metrics = list(DESIGN_METRICS)
     lines.append('quantile' + ''.join(f'{DESIGN_METRICS[m][0]:>13s}' for m in metrics))

@@ -81,14 +81,30 @@ def test_sim_gives_every_metric_s_quantiles_for_the_seed(capsys):
     assert json.loads(capsys.readouterr().out) == first
     assert mantis(['sim', '--scene', 'air_23mm', '--spread', '12']) == 0
     text = capsys.readouterr().out
-    assert '12 robots drawn from its spread (seed 1)' in text
+    assert '12 robots drawn from its spread, a new day\'s assembly each (seed 1)' in text
     assert sum(line.startswith(tuple(LEVELS)) for line in text.splitlines()) == 19
+
+
+def test_sim_draws_the_robots_of_a_day_the_spread_has_seen(capsys):
+    """Air at 23 mm: the arm sat about 8.7 degrees further on 0828019, about -2.7 on 031320
+    (docs/spread_benchmark.md): far less stored energy on the first day's robots."""
+    def median_energy(*day):
+        assert mantis(['sim', '--scene', 'air_23mm', '--spread', '12', '--json', *day]) == 0
+        report = json.loads(capsys.readouterr().out)
+        assert report['day'] == (day[1] if day else None)
+        return report['quantiles']['spring_energy_mJ']['q50']
+    far, near, new = (median_energy('--day', '0828019'), median_energy('--day', '031320'),
+                      median_energy())
+    assert far < new < near and near - far > 20.0
 
 
 @pytest.mark.parametrize('args, message', [
     (['--scene', 'reference_air_23mm', '--spread', '5'], 'has no spread'),
     (['--scene', 'air_23mm', '--spread', '0'], 'at least 2 robots'),
     (['--scene', 'air_23mm', '--spread', '5', '--plot', 'x.png'], 'for one simulation'),
+    (['--scene', 'air_23mm', '--spread', '5', '--day', '20261127'],
+     'has not seen that recording day (it knows: 031320, 0801319'),
+    (['--scene', 'air_23mm', '--day', '0828019'], '--day names the recording day'),
 ])
 def test_sim_refuses_a_spread_it_cannot_draw(capsys, args, message):
     assert mantis(['sim', *args]) == 2
