@@ -763,7 +763,8 @@ class _DenseSegment:
 
     def angles(self, times_ms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(theta1, theta3) at many times: with the arm free the integrated state starts with
-        them, and one call of the interpolant serves every time; latched, state by state."""
+        them, and one call of the interpolant serves every time; held on a taut rigid tendon,
+        they follow from the stage; otherwise latched, state by state."""
         if not self.mode.latched:
             th1, th3 = self.interpolant(times_ms)[:2]
             return th1, th3

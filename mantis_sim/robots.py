@@ -78,8 +78,8 @@ def design_spread(scene: Scene, n: int, seed: int, mapper: Callable,
     spread = scene_spread(scene)
     if day is not None and (spread.latent is None or day not in spread.latent.days):
         known = ', '.join(sorted(spread.latent.days)) if spread.latent is not None else ''
-        raise ParameterError(f'--day {day}: the spread of scene {scene.name} has not seen '
-                             f'that recording day (it knows: {known or "none"})')
+        raise ParameterError(f'the spread of scene {scene.name} has not seen recording day '
+                             f'{day} (it knows: {known or "none"})')
     draws = spread.draw(n, np.random.default_rng(seed), scene.geometry.contact_angle_deg, day)
     results = mapper(simulate_robot, [(scene, values) for values in draws.values])
     samples = {}

@@ -8,7 +8,8 @@ describes what differs between simulated robots of one design, each part drawn o
   assembly, plus its own scatter within the day, each normal (a mixed model over the training
   strikes' own values). The mean is drawn within its standard error, and the day's standard
   deviation from its own uncertainty (a scaled inverse chi-square on the days' degrees of
-  freedom: with a handful of days, a new day may lie further out than the fitted value says).
+  freedom: with a handful of days, a new day may lie further out than the fitted value says),
+  as is the within-day one (on the strikes' less the days').
   A strike of a recording day the fit has seen takes that day's assembly as the mixed model
   predicts it from the day's strikes (`days`: its offset from the mean, and the standard
   deviation of the day's level, mean + offset), not a new day's draw.

@@ -103,7 +103,7 @@ def test_sim_draws_the_robots_of_a_day_the_spread_has_seen(capsys):
     (['--scene', 'air_23mm', '--spread', '0'], 'at least 2 robots'),
     (['--scene', 'air_23mm', '--spread', '5', '--plot', 'x.png'], 'for one simulation'),
     (['--scene', 'air_23mm', '--spread', '5', '--day', '20261127'],
-     'has not seen that recording day (it knows: 031320, 0801319'),
+     'has not seen recording day 20261127 (it knows: 031320, 0801319'),
     (['--scene', 'air_23mm', '--day', '0828019'], '--day names the recording day'),
 ])
 def test_sim_refuses_a_spread_it_cannot_draw(capsys, args, message):
