@@ -80,6 +80,9 @@ def _interval_lines(intervals: dict) -> list[str]:
             continue
         digits = 4 if unit == 's' else 2
         lines.append(f'  {key:22s} {entry["low"]:.{digits}f} .. {entry["high"]:.{digits}f} {unit}')
+        if key == 'phase_start_s.II':
+            lines.append('  (unlatching: the interval of its detection; the arm leaves the latch '
+                         'earlier, by less than the frames resolve)')
     return lines
 
 

@@ -51,3 +51,4 @@ def test_analyze_gives_each_number_its_interval(strike_file, capsys):
     text = capsys.readouterr().out
     assert '80 % intervals (tracking noise: 2 replicas' in text
     assert sum(key in text for key in QUANTITIES) == len(QUANTITIES)
+    assert 'the interval of its detection; the arm leaves the latch earlier' in text
