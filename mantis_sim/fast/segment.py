@@ -6,7 +6,6 @@ results, each row's derived values run compiled.
 """
 from __future__ import annotations
 
-import contextlib
 import math
 
 import numpy as np
@@ -16,21 +15,29 @@ from . import layout
 from .radau import EVENT, OVER_BUDGET, STEP_TOO_SMALL, integrate
 
 
-@contextlib.contextmanager
-def interruptible():
-    """Around a compiled call: a Ctrl-C that lands while it runs comes back from numba's
-    dispatcher as a SystemError ("returned a result with an exception set"), caused, through
-    as many such SystemErrors as the dispatcher nests, by the KeyboardInterrupt; it is raised
-    as the KeyboardInterrupt it is, which every command answers with one line."""
-    try:
-        yield
-    except SystemError as exc:
-        cause = exc.__cause__
-        while isinstance(cause, SystemError):
-            cause = cause.__cause__
-        if isinstance(cause, KeyboardInterrupt):
-            raise KeyboardInterrupt from None
-        raise
+def interruptible(compiled):
+    """``compiled``, called so that a Ctrl-C landing while it runs comes back as the
+    KeyboardInterrupt it is, which every command answers with one line: numba's dispatcher
+    returns it as a SystemError ("returned a result with an exception set"), caused, through
+    as many such SystemErrors as the dispatcher nests, by the KeyboardInterrupt. A wrapper
+    made once per function, not a context per call: these calls are the strike's hot path."""
+    def call(*args):
+        try:
+            return compiled(*args)
+        except SystemError as exc:
+            cause = exc.__cause__
+            while isinstance(cause, SystemError):
+                cause = cause.__cause__
+            if isinstance(cause, KeyboardInterrupt):
+                raise KeyboardInterrupt from None
+            raise
+    return call
+
+
+_integrate = interruptible(integrate)
+_full_states = interruptible(eq.full_states)
+_state_dynamics = interruptible(eq.state_dynamics)
+_observe_rows = interruptible(eq.observe_rows)
 
 
 class SegmentFailed(RuntimeError):
@@ -75,15 +82,13 @@ class FastSegments:
         vector = mode_vector(mode)
         kinds, directions, constants = self._spec_arrays(specs)
         try:
-            with interruptible():
-                status, event, ts, ys, hs, qs = integrate(
-                    y0, t0, t1, rtol, np.asarray(atol, dtype=float), vector, p, knots, kinds,
-                    directions, constants, max_rhs_evals, ws, dense)
+            status, event, ts, ys, hs, qs = _integrate(
+                y0, t0, t1, rtol, np.asarray(atol, dtype=float), vector, p, knots, kinds,
+                directions, constants, max_rhs_evals, ws, dense)
             if status in (STEP_TOO_SMALL, OVER_BUDGET):
                 raise SegmentFailed(float(ts[-1]), status == OVER_BUDGET)
             ws[eq.WS_THETA1_GUESS] = start_theta1
-            with interruptible():
-                states = eq.full_states(ts, ys, vector, p, knots, ws)
+            states = _full_states(ts, ys, vector, p, knots, ws)
         finally:
             model.rhs_evals = int(ws[eq.WS_RHS_EVALS])
             model.theta1_guess = float(ws[eq.WS_THETA1_GUESS])
@@ -95,9 +100,8 @@ class FastSegments:
         p, knots = self.params()
         out = np.empty(eq.DYN_SIZE)
         self._ws[eq.WS_RHS_EVALS] = self.model.rhs_evals
-        with interruptible():
-            eq.state_dynamics(float(t), np.asarray(s, dtype=float), mode_vector(mode), p,
-                              knots, self._ws, out)
+        _state_dynamics(float(t), np.asarray(s, dtype=float), mode_vector(mode), p, knots,
+                        self._ws, out)
         self.model.rhs_evals = int(self._ws[eq.WS_RHS_EVALS])
         return out.tolist()
 
@@ -119,10 +123,9 @@ class FastSegments:
         p, knots = self.params()
         times = segment.t if times is None else times
         states = segment.states if states is None else states
-        with interruptible():
-            return eq.observe_rows(np.asarray(times, dtype=float),
-                                   np.ascontiguousarray(states, dtype=float),
-                                   mode_vector(segment), p, knots, self._ws)
+        return _observe_rows(np.asarray(times, dtype=float),
+                             np.ascontiguousarray(states, dtype=float),
+                             mode_vector(segment), p, knots, self._ws)
 
     def states_at(self, mode, interpolant, start_theta1: float, times) -> np.ndarray:
         """Full states (rows) at times along a segment's dense output (a held arm on a taut
@@ -131,8 +134,7 @@ class FastSegments:
         times = np.atleast_1d(np.asarray(times, dtype=float))
         packed = np.ascontiguousarray(interpolant(times).T.reshape(times.size, -1))
         self._ws[eq.WS_THETA1_GUESS] = start_theta1
-        with interruptible():
-            return eq.full_states(times, packed, mode_vector(mode), p, knots, self._ws)
+        return _full_states(times, packed, mode_vector(mode), p, knots, self._ws)
 
 
 class DenseSteps:

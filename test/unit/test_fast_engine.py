@@ -187,9 +187,10 @@ def test_a_ctrl_c_inside_a_compiled_call_is_the_keyboard_interrupt():
         except SystemError as exc:
             raise SystemError('returned a result with an exception set') from exc
 
+    def a_bug():
+        raise SystemError('a bug')
+
     with pytest.raises(KeyboardInterrupt):
-        with interruptible():
-            nested()
+        interruptible(nested)()
     with pytest.raises(SystemError, match='a bug'):
-        with interruptible():
-            raise SystemError('a bug')
+        interruptible(a_bug)()
