@@ -9,7 +9,6 @@ speed, on a local Dask cluster of this machine's cores (`--workers`, `--schedule
 """
 from __future__ import annotations
 
-import csv
 import json
 import math
 from pathlib import Path
@@ -21,6 +20,7 @@ from mantis_sim.errors import InputError
 from mantis_sim.scene import available_scenes, load_scene
 from mantis_sim.studies import fidelity, forecast, spread_fit
 from mantis_sim.studies import identify as ident
+from mantis_sim.studies.csv_table import write_rows
 from mantis_sim.studies.parallel import ClusterMap
 from mantis_sim.studies.strikes import (
     RECORD_WINDOW_S,
@@ -424,10 +424,7 @@ def run_compare(args) -> int:
     from mantis_sim.studies import compare_plots
     args.out.mkdir(parents=True, exist_ok=True)
     rows = fidelity.error_rows(strikes, simulated)
-    with open(args.out / 'errors.csv', 'w', newline='', encoding='utf-8') as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_rows(args.out / 'errors.csv', rows)
     compare_plots.plot_parity(rows, args.out / 'parity.png')
     for trial in args.figure:
         sim = simulated[strikes.index(trials[trial])]
@@ -462,20 +459,14 @@ def _check_spread_request(args, scenes) -> None:
 
 def _write_forecasts(forecasts, args, compare_plots) -> dict:
     """predictions.csv, spread_scores.csv and forecasts.png; the report's 'spread' entry."""
-    rows = forecast.prediction_rows(forecasts)
-    with open(args.out / 'predictions.csv', 'w', newline='', encoding='utf-8') as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_rows(args.out / 'predictions.csv', forecast.prediction_rows(forecasts))
     scores = forecast.scores(forecasts)
     columns = ['metric', 'group', 'strikes', 'coverage_50', 'coverage_80', 'crps',
                'crps_climatology', 'crps_ratio', 'median_abs_error_q50']
-    with open(args.out / 'spread_scores.csv', 'w', newline='', encoding='utf-8') as handle:
-        writer = csv.DictWriter(handle, fieldnames=columns, extrasaction='ignore')
-        writer.writeheader()
-        for metric, groups in scores.items():
-            for group, entry in groups.items():
-                writer.writerow({'metric': metric, 'group': group, **entry})
+    write_rows(args.out / 'spread_scores.csv',
+               ({'metric': metric, 'group': group, **entry}
+                for metric, groups in scores.items() for group, entry in groups.items()),
+               columns)
     compare_plots.plot_forecasts(forecasts, args.out / 'forecasts.png')
     return {'robots_per_strike': args.spread, 'seed': args.seed, 'scores': scores,
             'robots_not_struck': sum(f.not_struck for f in forecasts),

@@ -13,13 +13,13 @@
 """
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 
 import numpy as np
 
 from mantis_sim.designs import ID_COLUMN, STATUS_OK
 
+from .csv_table import write_rows
 from .sweep import SweepError
 
 SPEED, FORCE, ENERGY = 'peak_tip_speed_mps', 'peak_tendon_force_N', 'max_spring_energy_mJ'
@@ -105,12 +105,7 @@ def spread_effects(ok: list[dict], keys: list[str], metric: str) -> list[dict]:
 
 
 def _spread_effects_table(effects: list[dict], out_dir: Path) -> Path:
-    path = out_dir / 'spread_effects.csv'
-    with open(path, 'w', newline='', encoding='utf-8') as f:
-        writer = csv.DictWriter(f, list(effects[0]))
-        writer.writeheader()
-        writer.writerows(effects)
-    return path
+    return write_rows(out_dir / 'spread_effects.csv', effects)
 
 
 def _intervals(plt, ok, keys, metric, out_dir) -> Path:
@@ -209,11 +204,5 @@ def _pareto(plt, ok, out_dir) -> Path:
 
 
 def _best_table(rows, keys, force_limit_n, top, out_dir) -> Path:
-    path = out_dir / 'best_designs.csv'
-    columns = [ID_COLUMN, *keys, SPEED, FORCE, ENERGY]
-    with open(path, 'w', newline='', encoding='utf-8') as f:
-        writer = csv.DictWriter(f, columns, extrasaction='ignore')
-        writer.writeheader()
-        for row in best_designs(rows, force_limit_n, top):
-            writer.writerow(row)
-    return path
+    return write_rows(out_dir / 'best_designs.csv', best_designs(rows, force_limit_n, top),
+                      [ID_COLUMN, *keys, SPEED, FORCE, ENERGY])
