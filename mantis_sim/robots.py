@@ -76,7 +76,7 @@ def design_spread(scene: Scene, n: int, seed: int, mapper: Callable,
     """N robots of the scene's design drawn from its spread, simulated through ``mapper``; of
     recording day ``day``'s assembly if given (one the spread has seen)."""
     spread = scene_spread(scene)
-    if day is not None and (spread.latent is None or day not in spread.latent.days):
+    if day is not None and not spread.knows_day(day):
         known = ', '.join(sorted(spread.latent.days)) if spread.latent is not None else ''
         raise ParameterError(f'the spread of scene {scene.name} has not seen recording day '
                              f'{day} (it knows: {known or "none"})')

@@ -129,6 +129,10 @@ class Spread:
             factors[d.metric] = 1.0 + bias + rng.normal(0.0, d.sd, n)
         return Draws(values, factors)
 
+    def knows_day(self, day: Optional[str]) -> bool:
+        """Whether the fit has seen recording day ``day`` (its strikes then draw its assembly)."""
+        return self.latent is not None and day in self.latent.days
+
     def one_model(self, rng: np.random.Generator) -> Spread:
         """This spread with what the data leave uncertain drawn once: the parameters, the
         latent's mean and day scatter, the discrepancy's bias. What remains is how strikes of
@@ -175,7 +179,7 @@ class Spread:
                       day: Optional[str] = None) -> np.ndarray:
         lat = self.latent
         lower, upper = self.latent_range(contact_angle_deg)
-        if day in lat.days:
+        if self.knows_day(day):
             offset, level_sd = lat.days[day]
             level = rng.normal(lat.mean + offset, level_sd, n)
         else:

@@ -150,18 +150,8 @@ def left_out_days(scenes: dict[str, Scene], latents: Sequence, param, n: int, se
     and its day's in the mixed model, discrepancy and climatology, left out); the scenes'
     identified parameters stay as they are, fitted to every day. ``latents``: each strike's
     own (spread_fit.strike_latents)."""
-    from .spread_fit import spreads_from
-    strikes = [x.strike for x in latents]
-    days = sorted({s.recording_day for s in strikes})
-    index = {s.trial: i for i, s in enumerate(strikes)}
-    out: list = [None] * len(strikes)
-    for day in days:
-        kept = [x for x in latents if x.strike.recording_day != day]
-        left = [s for s in strikes if s.recording_day == day]
-        spreads, _ = spreads_from(kept, {g: scenes[g] for g in {s.group for s in left}}, param)
-        for s, f in zip(left, forecast_strikes(scenes, left, n, seed, mapper, spreads)):
-            out[index[s.trial]] = f
-    return out
+    return _left_out(scenes, latents, param, n, seed, mapper,
+                     [x.strike.recording_day for x in latents])
 
 
 def left_out_strikes(scenes: dict[str, Scene], latents: Sequence, param, n: int, seed: int,
@@ -169,19 +159,28 @@ def left_out_strikes(scenes: dict[str, Scene], latents: Sequence, param, n: int,
     """Every strike forecast by the spread fitted without it: a later strike of a day the
     spread has seen, forecast from that day's other strikes (a day of one strike becomes a new
     day). As left_out_days, the scenes' identified parameters stay fitted to every strike."""
+    return _left_out(scenes, latents, param, n, seed, mapper, list(range(len(latents))))
+
+
+def _left_out(scenes: dict[str, Scene], latents: Sequence, param, n: int, seed: int,
+              mapper: Callable, units: list) -> list[StrikeForecast]:
+    """Each strike forecast by the spread refitted without the strikes of its unit
+    (``units``: one per latent; the strikes of a unit are left out together)."""
     from .spread_fit import spreads_from
-    out = []
-    for i, x in enumerate(latents):
-        kept = [other for j, other in enumerate(latents) if j != i]
-        group = x.strike.group
-        spreads, _ = spreads_from(kept, {group: scenes[group]}, param)
-        out += forecast_strikes(scenes, [x.strike], n, seed, mapper, spreads)
+    out: list = [None] * len(latents)
+    for unit in dict.fromkeys(units):
+        at = [i for i, u in enumerate(units) if u == unit]
+        kept = [x for x, u in zip(latents, units) if u != unit]
+        left = [latents[i].strike for i in at]
+        spreads, _ = spreads_from(kept, {g: scenes[g] for g in {s.group for s in left}}, param)
+        for i, f in zip(at, forecast_strikes(scenes, left, n, seed, mapper, spreads)):
+            out[i] = f
     return out
 
 
 def day_seen(spread: Spread, strike: RealStrike) -> bool:
     """Whether the spread knows the strike's recording day (and forecasts from its assembly)."""
-    return spread.latent is not None and strike.recording_day in spread.latent.days
+    return spread.knows_day(strike.recording_day)
 
 
 __all__ = ['FORECAST_METRICS', 'INTERVALS', 'StrikeForecast', 'day_seen', 'forecast_strikes',
