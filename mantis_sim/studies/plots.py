@@ -94,10 +94,10 @@ def spread_effects(ok: list[dict], keys: list[str], metric: str) -> list[dict]:
                            for r in ok]))
     out = []
     for key, slope in zip(keys, slopes):
-        span = max(r[key] for r in ok) - min(r[key] for r in ok)
-        change = slope.value * span
-        out.append({'key': key, 'metric': metric, 'low': min(r[key] for r in ok),
-                    'high': max(r[key] for r in ok), 'change_of_median': change,
+        low, high = min(r[key] for r in ok), max(r[key] for r in ok)
+        change = slope.value * (high - low)
+        out.append({'key': key, 'metric': metric, 'low': low, 'high': high,
+                    'change_of_median': change,
                     'one_strike_sd': sd,
                     'exceeds_one_strike_scatter': bool(abs(change) > sd),
                     'strikes_per_design_to_see_it': strikes_needed(change, sd)})

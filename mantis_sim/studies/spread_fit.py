@@ -83,7 +83,6 @@ class LatentModel:
     day_sd: float
     day_sd_std_error: float
     strike_sd: float
-    strike_sd_std_error: float
     days: int
     strikes: int
     #: group -> {recording day: (its assembly's offset from the group's mean, the standard
@@ -100,6 +99,12 @@ class LatentModel:
     def strike_dof(self) -> int:
         """The within-day variance's degrees of freedom: strikes less days."""
         return max(self.strikes - self.days, 1)
+
+    @property
+    def strike_sd_std_error(self) -> float:
+        """As for a sample standard deviation on strike_dof (statsmodels reports no standard
+        error of the scale)."""
+        return self.strike_sd / math.sqrt(2.0 * self.strike_dof)
 
 
 def strike_latents(scenes: dict[str, Scene], strikes: Sequence[RealStrike],
@@ -127,10 +132,6 @@ def latent_model(latents: Sequence[StrikeLatent], key: str) -> LatentModel:
     exog = np.array([[x.strike.group == g for g in groups] for x in used], dtype=float)
     units = [f'{x.strike.group}#{x.strike.recording_day}' for x in used]
     fit = _mixed_model(y, exog, units)
-    days = len(set(units))
-    # the within-day variance's standard error: as for a sample variance on the degrees of
-    # freedom left within days (statsmodels reports none for the scale)
-    within_dof = max(len(used) - days, 1)
     strike_sd = math.sqrt(fit.strike_var)
     # REML ends the day variance at its bound, zero, only to within its optimiser's tolerance:
     # a day scatter under 3 % of the strikes' is taken as none
@@ -138,8 +139,7 @@ def latent_model(latents: Sequence[StrikeLatent], key: str) -> LatentModel:
     means = {g: (float(m), float(se)) for g, m, se in zip(groups, fit.means, fit.mean_std_errors)}
     return LatentModel(
         key, means, day_sd, _sd_std_error(day_sd, fit.day_var_std_error), strike_sd,
-        strike_sd / math.sqrt(2.0 * within_dof), days, len(used),
-        _day_levels(used, fit, means, day_sd > 0))
+        len(set(units)), len(used), _day_levels(used, fit, means, day_sd > 0))
 
 
 def _day_levels(used: Sequence[StrikeLatent], fit: _MixedFit, means: dict,
