@@ -17,6 +17,8 @@ leave uncertain in the peak tip speed, the most spring energy and the phase star
   shift either way.
 - **The resolution.** A phase start is found on the frames: its interval is widened by one
   frame either side; the spring energy by what the body angle's quantisation floor moves it.
+- **The unlatching** is fitted by the form of the arm's departure (analysis.onset): its noise
+  interval is that fit's profile likelihood, not the replicas', and it is not found on a frame.
 
 The interval's level is LEVEL (80 %). A replica or a choice whose analysis fails (no strike
 found in it, say) is counted and left out.
@@ -38,9 +40,10 @@ from .tracking import MarkerTracks
 LEVEL = 0.8
 #: The tracker's jitter in units of its step (mantis_sim.parameters.Camera: 0.03 px / 0.1 px).
 TRACKING_NOISE_STEPS = 0.3
+UNLATCHING = 'phase_start_s.II'
 #: The reported quantities: summary key (a dotted one is nested) -> unit.
 QUANTITIES = {'peak_tip_speed_mps': 'm/s', 'max_spring_energy_mJ': 'mJ',
-              'phase_start_s.II': 's', 'phase_start_s.III': 's', 'phase_start_s.IV': 's'}
+              UNLATCHING: 's', 'phase_start_s.III': 's', 'phase_start_s.IV': 's'}
 # Each estimator choice and its alternatives (the defaults' half and double, or about so).
 SMOOTHING_PRECISION = (0.5, 2.0)              # x AnalysisParams.rel_precision
 STRIKE_WINDOW_SHARE = (1.0 / 10.0, 1.0 / 5.0)  # against the default 1/7
@@ -63,10 +66,12 @@ class Intervals:
     replicas: int               # noise replicas analysed
     choices: int                # alternative choices analysed
     failed: int                 # replicas and choices whose analysis failed
+    # Keys whose low end is only where the frames fitted begin: the frames do not bound them.
+    open_below: tuple = ()
 
     def to_json(self) -> dict:
         return {'level': LEVEL, 'replicas': self.replicas, 'choices': self.choices,
-                'failed': self.failed,
+                'failed': self.failed, 'open_below': list(self.open_below),
                 **{key: {'low': i.low, 'high': i.high} for key, i in self.quantities.items()}}
 
 
@@ -83,9 +88,11 @@ def track_intervals(tracks: MarkerTracks, params: AnalysisParams, result: TrialA
     step_mm = coordinate_resolution_mm(tracks)
     failed = 0
     noisy = []
+    # The unlatching's noise interval is its fit's own (below): the replicas need not fit it.
+    retracked = replace(params, fit_unlatch_onset=False)
     for _ in range(replicas):
         copy = _tracked_again(tracks, rng, step_mm)
-        summary = _summary_or_none(lambda c=copy: analyze_tracks(c, params))
+        summary = _summary_or_none(lambda c=copy: analyze_tracks(c, retracked))
         failed += summary is None
         if summary is not None:
             noisy.append(summary)
@@ -97,22 +104,31 @@ def track_intervals(tracks: MarkerTracks, params: AnalysisParams, result: TrialA
         if summary is not None:
             chosen.append(summary)
     trial = result.summary()
-    resolution = _resolutions(tracks, params, trial, linkage)
-    out = {}
+    resolution = _resolutions(tracks, params, trial, linkage, result.unlatch_onset)
+    out, open_below = {}, []
     for key in QUANTITIES:
         value = value_of(trial, key)
-        out[key] = _interval(value, [value_of(s, key) for s in noisy],
-                             [value_of(s, key) for s in chosen], resolution.get(key, 0.0))
-    return Intervals(out, replicas, len(chosen), failed)
+        if key == UNLATCHING and result.unlatch_onset is not None:
+            *noise, bounded = result.unlatch_onset.interval(LEVEL)
+            if not bounded:
+                open_below.append(key)
+        else:
+            noise = _basic_bootstrap(value, [value_of(s, key) for s in noisy])
+        out[key] = _interval(value, noise, [value_of(s, key) for s in chosen],
+                             resolution.get(key, 0.0))
+    return Intervals(out, replicas, len(chosen), failed, tuple(open_below))
 
 
-def _resolutions(tracks: MarkerTracks, params: AnalysisParams, trial: dict, linkage) -> dict:
-    """What the recording resolves at best: a phase start to a frame; the spring energy,
-    E = k (theta - rest)^2 / 2, to what the body angle's quantisation floor moves it,
-    sqrt(2 k E) times that floor."""
+def _resolutions(tracks: MarkerTracks, params: AnalysisParams, trial: dict, linkage,
+                 onset) -> dict:
+    """What the recording resolves at best: a phase start found on the frames to a frame
+    (not the unlatching fitted by its departure's form, whose interval is the fit's); the
+    spring energy, E = k (theta - rest)^2 / 2, to what the body angle's quantisation floor
+    moves it, sqrt(2 k E) times that floor."""
     frame_s = float(np.median(np.diff(tracks.time_s)))
     energy = value_of(trial, 'max_spring_energy_mJ')
-    out = {key: frame_s for key, unit in QUANTITIES.items() if unit == 's'}
+    out = {key: frame_s for key, unit in QUANTITIES.items()
+           if unit == 's' and not (key == UNLATCHING and onset is not None)}
     if math.isfinite(energy) and energy > 0:
         out['max_spring_energy_mJ'] = (math.sqrt(2.0 * params.k_s_Nmm_per_rad * energy)
                                        * linkage.body_noise_floor_rad)
@@ -168,17 +184,23 @@ def _summary_or_none(run) -> dict | None:
         return None
 
 
-def _interval(value: float, noisy: list[float], chosen: list[float],
-              resolution: float = 0.0) -> Interval:
-    """The basic bootstrap interval of the noise replicas, widened by the choices' shifts either
-    way and by ``resolution`` either side (a time is found on the frames: within one of the truth at
-    best)."""
+def _basic_bootstrap(value: float, noisy: list[float]) -> tuple[float, float]:
+    """The trial's value less the replicas' deviations' upper and lower quantiles."""
     noisy = np.array([v for v in noisy if math.isfinite(v)])
     if not math.isfinite(value) or noisy.size < 2:
-        return Interval(value, math.nan, math.nan)
+        return math.nan, math.nan
     tail = (1.0 - LEVEL) / 2.0
     q_low, q_high = np.quantile(noisy, [tail, 1.0 - tail])
-    low, high = 2.0 * value - q_high, 2.0 * value - q_low
+    return 2.0 * value - q_high, 2.0 * value - q_low
+
+
+def _interval(value: float, noise: tuple[float, float], chosen: list[float],
+              resolution: float = 0.0) -> Interval:
+    """The noise's interval, widened by the choices' shifts either way and by ``resolution``
+    either side (a time is found on the frames: within one of the truth at best)."""
+    low, high = noise
+    if not (math.isfinite(value) and math.isfinite(low) and math.isfinite(high)):
+        return Interval(value, math.nan, math.nan)
     shifts = [abs(v - value) for v in chosen if math.isfinite(v)]
     if shifts:                          # which way the estimator errs is not known
         low, high = min(low, value - max(shifts)), max(high, value + max(shifts))

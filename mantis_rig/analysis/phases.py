@@ -3,7 +3,9 @@
 - loading start: θ1 first leaves its initial value by more than the detection threshold.
 - unlatching (I→II): the arm leaves the contact angle for good. θ3 while latched sits on a
   floor (it may sag a little as the contact compresses); unlatching is the last time before
-  the strike that smoothed θ3 is within the threshold of its lowest pre-strike value.
+  the strike that smoothed θ3 is within the threshold of its lowest pre-strike value. That
+  crossing is late by the time the arm takes to leave the latch by the threshold; where the
+  departure has the released arm's form, analysis.onset fits it back to its start.
 - overcentering (II→III): the tendon line c–d passes over the arm pivot b, i.e.
   ∂l_t/∂θ3 = 0 ⇔ L1 sin(θ3 + β) + d_t sin(θ1 − θ3 − β) = 0 (model angles). The guide hole is
   not tracked, so this needs the model θ1 (caller's θ1 reference) and the absolute θ3 (arm

@@ -25,6 +25,7 @@ from .kinematics import (
     fit_linkage,
     tip_speed_mps,
 )
+from .onset import Onset, unlatch_onset
 from .smoothing import (
     STRIKE_POLY,
     angle_noise_rad,
@@ -80,6 +81,8 @@ class AnalysisParams:
     # The strike's polynomial fits reach this share of the time from the start of IV to the
     # peak tip speed either side of a frame.
     strike_window_share: float = 1.0 / 7.0
+    # Unlatching: refine the level crossing by fitting the arm's departure (analysis.onset).
+    fit_unlatch_onset: bool = True
     # Optional tendon force samples (N) with their own time base (s).
     tendon_force_N: np.ndarray | None = None
     tendon_force_time_s: np.ndarray | None = None
@@ -109,6 +112,9 @@ class TrialAnalysis:
     body_pivot_mm: np.ndarray | None = None     # in AnalysisParams.pivot_frame
     overcentering_method: str = 'tendon geometry'   # or 'trajectory knee'
     lost_frames_in_strike: int = 0                  # gaps (lost markers) in phase IV
+    # The unlatching's start from the departure's form (phases.unlatch_s is it when found);
+    # None where the frames could not hold the fit and the level crossing stands.
+    unlatch_onset: Onset | None = None
 
     @property
     def arm_ke_share_at_peak(self) -> float:
@@ -128,6 +134,8 @@ class TrialAnalysis:
                               'III': p.overcentering_s, 'IV': p.max_contraction_s},
             'overcentering_s': p.overcentering_s,
             'overcentering_method': self.overcentering_method,
+            'unlatch_method': ('departure form' if self.unlatch_onset is not None
+                               else 'level crossing'),
             'peak_tip_speed_s': p.peak_tip_speed_s,
             'peak_body_speed_radps': float(np.max(self.omega1_radps[strike])),
             'peak_arm_speed_radps': float(np.max(self.omega3_radps[strike])),
@@ -335,6 +343,8 @@ def _analyze(t: np.ndarray, theta1_raw: np.ndarray, theta3_raw: np.ndarray, L1_m
         i_load = int(np.searchsorted(t, t_load))
     t_unlatch = ph.unlatch_time(t, arm_on_body, thr3, i_load, i_iv)
     i_unlatch = int(np.searchsorted(t, t_unlatch))
+    onset = (unlatch_onset(t, theta3_raw - play, arm_on_body, sig3, t_unlatch, i_iv)
+             if params.fit_unlatch_onset else None)
     # θ3's latched level: the arm rests on the body, a constant angle to it; to the link it
     # is that angle in the rest pose, where loading starts (while loading, the link turns
     # less than the body if the joint has play, and the arm with the body).
@@ -368,7 +378,8 @@ def _analyze(t: np.ndarray, theta1_raw: np.ndarray, theta3_raw: np.ndarray, L1_m
         # direction is not seen, and the set-up's θ1 varies by ±0.25 rad between trials): the
         # knee of the (θ1, θ3) path, where the tendon stops holding the arm, stands in.
         t_oc, oc_method = t_knee, 'trajectory knee'
-    times = ph.PhaseTimes(t_load, t_unlatch, t_oc, t_iv, t_peak, i_iv, i_peak)
+    times = ph.PhaseTimes(t_load, t_unlatch if onset is None else onset.start_s, t_oc, t_iv,
+                          t_peak, i_iv, i_peak)
     return TrialAnalysis(
         time_s=t, theta1_rad=th1, theta3_rad=th3, omega1_radps=w1, omega3_radps=w3,
         tip_speed_mps=tip,
@@ -377,7 +388,7 @@ def _analyze(t: np.ndarray, theta1_raw: np.ndarray, theta3_raw: np.ndarray, L1_m
         ke_body_mJ=ke_body, ke_arm_mJ=ke_arm, overcentering_residual_mm=residual,
         tendon_work_mJ=work, phases=times, L1_mm=float(L1_mm), contact_angle_rad=contact,
         overcentering_trajectory_s=t_knee, peak_tip_speed=v_peak, strike_half_width=strike_k,
-        overcentering_method=oc_method,
+        overcentering_method=oc_method, unlatch_onset=onset,
     )
 
 

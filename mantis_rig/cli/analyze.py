@@ -46,7 +46,8 @@ def _print_text(report):
     lines = [
         f'input            {report["input"]["path"]} ({report["input"]["frames"]} frames)',
         f'peak tip speed   {report["peak_tip_speed_mps"]:.2f} m/s',
-        'phase starts     ' + ', '.join(f'{k} {_seconds(v)}' for k, v in phases.items()),
+        'phase starts     ' + ', '.join(f'{k} {_seconds(v)}' for k, v in phases.items())
+        + f' (II: its {report["unlatch_method"]})',
         f'overcentering    {_seconds(report["overcentering_s"])}',
         f'peak body speed  {report["peak_body_speed_radps"]:.1f} rad/s',
         f'peak arm speed   {report["peak_arm_speed_radps"]:.1f} rad/s (relative to the body)',
@@ -60,7 +61,8 @@ def _print_text(report):
         f'L1               {report["L1_mm"]:.2f} mm',
     ]
     if 'intervals' in report:
-        lines += _interval_lines(report['intervals'])
+        lines += _interval_lines(report['intervals'],
+                                 report['unlatch_method'] == 'departure form')
     if report['input'].get('parameters'):
         lines.append('parameters       ' + '; '.join(report['input']['parameters']))
     if 'tendon_work_to_IV_mJ' in report:
@@ -68,7 +70,7 @@ def _print_text(report):
     print('\n'.join(lines))
 
 
-def _interval_lines(intervals: dict) -> list[str]:
+def _interval_lines(intervals: dict, by_departure: bool) -> list[str]:
     from ..analysis.intervals import QUANTITIES
     lines = [f'{100 * intervals["level"]:.0f} % intervals (tracking noise: '
              f'{intervals["replicas"]} replicas; the estimator\'s choices: '
@@ -79,10 +81,12 @@ def _interval_lines(intervals: dict) -> list[str]:
             lines.append(f'  {key:22s} not seen')
             continue
         digits = 4 if unit == 's' else 2
-        lines.append(f'  {key:22s} {entry["low"]:.{digits}f} .. {entry["high"]:.{digits}f} {unit}')
-        if key == 'phase_start_s.II':
-            lines.append('  (unlatching: the interval of its detection; the arm leaves the latch '
-                         'earlier, by less than the frames resolve)')
+        before = 'at or before ' if key in intervals.get('open_below', ()) else ''
+        lines.append(f'  {key:22s} {before}{entry["low"]:.{digits}f} .. '
+                     f'{entry["high"]:.{digits}f} {unit}')
+        if key == 'phase_start_s.II' and not by_departure:
+            lines.append('  (unlatching: the interval of its level crossing; the arm leaves the '
+                         'latch earlier, by less than the frames resolve)')
     return lines
 
 

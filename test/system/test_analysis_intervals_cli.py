@@ -51,4 +51,7 @@ def test_analyze_gives_each_number_its_interval(strike_file, capsys):
     text = capsys.readouterr().out
     assert '80 % intervals (tracking noise: 2 replicas' in text
     assert sum(key in text for key in QUANTITIES) == len(QUANTITIES)
-    assert 'the interval of its detection; the arm leaves the latch earlier' in text
+    # the robot's arm creeps off its latch: its unlatching is the level crossing, and says so
+    assert report['unlatch_method'] == 'level crossing' and intervals['open_below'] == []
+    assert '(II: its level crossing)' in text
+    assert 'the interval of its level crossing; the arm leaves the latch earlier' in text

@@ -4,24 +4,27 @@ a time is widened by a frame; the re-tracking keeps the tracker's step and lost 
 import numpy as np
 import pytest
 
-from mantis_rig.analysis.intervals import _interval, _tracked_again
+from mantis_rig.analysis.intervals import _basic_bootstrap, _interval, _tracked_again
 from mantis_rig.analysis.tracking import MarkerTracks
 from mantis_sim.errors import InputError
 
 
 def test_the_interval_reflects_the_deviations_and_holds_every_choice():
     noisy = list(np.linspace(10.0, 12.0, 101))            # re-trackings read high by 0 .. 2
-    interval = _interval(10.0, noisy, [])
+    noise = _basic_bootstrap(10.0, noisy)
     # the 10 % and 90 % quantiles are 10.2 and 11.8: reflected about 10, 8.2 .. 9.8
+    assert noise == pytest.approx((8.2, 9.8))
+    interval = _interval(10.0, noise, [])
     assert interval.low == pytest.approx(8.2) and interval.high == pytest.approx(9.8)
     # a choice 0.5 above: the value may be 0.5 off either way
-    widened = _interval(10.0, noisy, [10.5, float('nan')], resolution=0.1)
+    widened = _interval(10.0, noise, [10.5, float('nan')], resolution=0.1)
     assert widened.low == pytest.approx(8.1) and widened.high == pytest.approx(10.6)
     assert widened.holds(10.55) and not widened.holds(10.7)
-    far = _interval(10.0, noisy, [6.0])
+    far = _interval(10.0, noise, [6.0])
     assert far.low == pytest.approx(6.0) and far.high == pytest.approx(14.0)
-    assert np.isnan(_interval(float('nan'), noisy, []).low)
-    assert np.isnan(_interval(10.0, [11.0], []).low)                # too few re-trackings
+    assert np.isnan(_interval(float('nan'), noise, []).low)
+    assert np.isnan(_basic_bootstrap(10.0, [11.0])[0])               # too few re-trackings
+    assert np.isnan(_interval(10.0, _basic_bootstrap(10.0, [11.0]), []).low)
 
 
 def test_a_re_tracking_keeps_the_step_and_the_lost_positions():
