@@ -114,7 +114,8 @@ def track_intervals(tracks: MarkerTracks, params: AnalysisParams, result: TrialA
                 open_below.append(key)
         else:
             noise = _basic_bootstrap(value, [value_of(s, key) for s in noisy])
-        out[key] = _interval(value, noise, [value_of(s, key) for s in chosen],
+        out[key] = _interval(value, noise, [value_of(s, key) for s in chosen
+                                            if _same_method(s, trial, key)],
                              resolution.get(key, 0.0))
     return Intervals(out, replicas, len(chosen), failed, tuple(open_below))
 
@@ -175,6 +176,12 @@ def _choices(tracks: MarkerTracks, params: AnalysisParams, linkage, angles: Join
         yield lambda p=varied: analyze_linkage(tracks, linkage, angles, p)
     for factor in LINKAGE_SPEED_SHARE:
         yield lambda f=factor: analyze_tracks(tracks, params, STRIKE_SPEED_SHARE * f)
+
+
+def _same_method(summary: dict, trial: dict, key: str) -> bool:
+    """Whether a choice found ``key`` as the trial did: an unlatching that fell back to its
+    level crossing, milliseconds late, is another estimate, not a choice's shift of it."""
+    return key != UNLATCHING or summary['unlatch_method'] == trial['unlatch_method']
 
 
 def _summary_or_none(run) -> dict | None:
