@@ -81,9 +81,10 @@ def value_of(summary: dict, key: str) -> float:
     return math.nan if value is None else float(value)
 
 
-def track_intervals(tracks: MarkerTracks, params: AnalysisParams, result: TrialAnalysis,
-                    replicas: int, seed: int = 0) -> Intervals:
-    """The intervals of ``result``, the analysis of ``tracks`` with ``params``."""
+def track_intervals(tracks: MarkerTracks, result: TrialAnalysis, replicas: int,
+                    seed: int = 0) -> Intervals:
+    """The intervals of ``result``, the analysis of ``tracks`` (with its own parameters)."""
+    params = result.params
     rng = np.random.default_rng(seed)
     step_mm = coordinate_resolution_mm(tracks)
     failed = 0

@@ -115,6 +115,7 @@ class TrialAnalysis:
     # The unlatching's start from the departure's form (phases.unlatch_s is it when found);
     # None where the frames could not hold the fit and the level crossing stands.
     unlatch_onset: Onset | None = None
+    params: AnalysisParams | None = None            # what it was analysed with
 
     @property
     def arm_ke_share_at_peak(self) -> float:
@@ -166,7 +167,7 @@ def analyze_linkage(tracks: MarkerTracks, linkage: LinkageFit, angles: JointAngl
     result = _analyze(angles.time_s, theta1, angles.theta3_rad, linkage.L1_mm, params,
                       linkage.angle_noise_floor_rad, body_raw=body,
                       body_floor_rad=linkage.body_noise_floor_rad)
-    result.linkage, result.angles = linkage, angles
+    result.linkage, result.angles, result.params = linkage, angles, params
     result.body_pivot_mm = pivot_in_frame(linkage.body_pivot_mm, tracks.handedness,
                                           params.pivot_frame)
     result.lost_frames_in_strike = check_strike_tracked(result, tracks.time_s)

@@ -153,7 +153,7 @@ def interval_coverage(scene_name: str = 'air_23mm_rig', films: int = 20,
     for k in range(films):
         tracks = film(world, scene.camera.frame_rate_hz, k / films)
         result = analyze_tracks(tracks, params)
-        found = track_intervals(tracks, params, result, replicas, seed=k)
+        found = track_intervals(tracks, result, replicas, seed=k)
         summary = result.summary()
         for key, interval in found.quantities.items():
             held[key] += interval.holds(true[key])

@@ -125,10 +125,8 @@ def _analyze_one(args) -> int:
         err('analyze', f'warning: {text}')
     report = analysis_report(analysis, trial, args.path, parameters)
     if args.intervals:
-        from ..analysis.batch import trial_params
         from ..analysis.intervals import track_intervals
-        params, _ = trial_params(trial, given)
-        report['intervals'] = track_intervals(trial.tracks, params, analysis, args.intervals,
+        report['intervals'] = track_intervals(trial.tracks, analysis, args.intervals,
                                               args.seed).to_json()
     if args.plot:
         from ..analysis.plots import plot_trial
