@@ -30,7 +30,7 @@ from mantis_sim.studies.strikes import (
     read_strikes,
 )
 
-from .options import add_cluster_options, check_out_folder, json_safe
+from .options import add_cluster_options, check_out_folder, check_spread_request, json_safe
 
 
 def add_commands(commands) -> None:
@@ -446,15 +446,10 @@ def run_compare(args) -> int:
 
 
 def _check_spread_request(args, scenes) -> None:
-    if args.spread < 2:
-        raise InputError(f'--spread {args.spread}: a spread needs at least 2 robots per strike')
+    check_spread_request(args.spread, scenes, per=' per strike')
     if args.at_seat:
         raise InputError('--spread draws where each arm sits from the scene\'s spread, which '
                          '--at-seat would set from the tracks: use one or the other')
-    missing = sorted(g for g, scene in scenes.items() if scene.spread is None)
-    if missing:
-        raise InputError(f'--spread: no spread in the scene of {", ".join(missing)}: fit one '
-                         f'with `mantis identify --spread` (docs/spread.md)')
 
 
 def _write_forecasts(forecasts, args, compare_plots) -> dict:

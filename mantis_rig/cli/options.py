@@ -20,6 +20,17 @@ def check_out_folder(path) -> None:
         raise InputError(f'--out {path}: exists and is not a folder')
 
 
+def check_spread_request(robots: int, scenes: dict, per: str = '') -> None:
+    """Refuse a ``--spread N`` of fewer than two robots (``per``: what each N is drawn for),
+    or for scenes (name -> Scene) without a spread."""
+    if robots < 2:
+        raise InputError(f'--spread {robots}: a spread needs at least 2 robots{per}')
+    missing = sorted(name for name, scene in scenes.items() if scene.spread is None)
+    if missing:
+        raise InputError(f'--spread: no spread in the scene of {", ".join(missing)}: fit one '
+                         f'with `mantis identify --spread` (docs/spread.md)')
+
+
 def json_safe(value):
     """``value`` with every non-finite float as None: JSON has no NaN or infinity."""
     if isinstance(value, float):

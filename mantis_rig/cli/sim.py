@@ -13,7 +13,7 @@ from mantis_sim.spread import DEFAULT_ROBOTS
 from mantis_sim.studies import strike_report
 
 from ..contract import FORCE_CEILING
-from .options import json_safe
+from .options import check_spread_request, json_safe
 
 
 def add_commands(commands) -> None:
@@ -103,13 +103,9 @@ def run_sim(args) -> int:
 def _run_spread(args, scene) -> int:
     from mantis_sim import robots
     from mantis_sim.studies.parallel import ClusterMap
-    if args.spread < 2:
-        raise InputError(f'--spread {args.spread}: a spread needs at least 2 robots')
+    check_spread_request(args.spread, {scene.name: scene})
     if args.out or args.plot:
         raise InputError('--spread prints quantiles: --out and --plot are for one simulation')
-    if scene.spread is None:
-        raise InputError(f'--spread: scene {scene.name} has no spread; fit one with `mantis '
-                         f'identify --spread` (docs/spread.md)')
     with ClusterMap(workers=0, progress=not args.json, unit='robots') as mapper:
         run = robots.design_spread(scene, args.spread, args.seed, mapper, args.day)
     table = run.quantiles()

@@ -4,7 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 import sys
 
-from .options import add_cluster_options
+from .options import add_cluster_options, check_spread_request
 
 
 def add_commands(commands) -> None:
@@ -77,11 +77,8 @@ def run_sweep_command(args) -> int:
     ranges = [parse_range(text, need_n=args.sample is None) for text in args.vary]
     overrides = list(args.overrides)
     base = load_scene(args.scene, overrides)          # unknown scene or bad --set: refused
-    if args.spread and (args.spread < 2 or base.spread is None):
-        raise SweepError(f'--spread {args.spread}: needs at least 2 robots and a scene with a '
-                         f'spread' + ('' if base.spread is not None else
-                                      f' ({base.name} has none; `mantis identify --spread` '
-                                      f'fits one, docs/spread.md)'))
+    if args.spread:
+        check_spread_request(args.spread, {base.name: base})
     check_ranges(base, ranges)
     estimate_s = 0.01
     designs = (latin_hypercube(ranges, args.sample, args.seed) if args.sample is not None

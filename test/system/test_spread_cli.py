@@ -99,7 +99,7 @@ def test_sim_draws_the_robots_of_a_day_the_spread_has_seen(capsys):
 
 
 @pytest.mark.parametrize('args, message', [
-    (['--scene', 'reference_air_23mm', '--spread', '5'], 'has no spread'),
+    (['--scene', 'reference_air_23mm', '--spread', '5'], 'no spread in the scene of'),
     (['--scene', 'air_23mm', '--spread', '0'], 'at least 2 robots'),
     (['--scene', 'air_23mm', '--spread', '5', '--plot', 'x.png'], 'for one simulation'),
     (['--scene', 'air_23mm', '--spread', '5', '--day', '20261127'],
@@ -173,7 +173,7 @@ def test_sweep_refuses_a_spread_the_scene_lacks(tmp_path, capsys):
                    'geometry.d_t_mm=19:25:3', '--spread', '10', '--out',
                    str(tmp_path / 'x.parquet'), '--workers', '0', '--quiet'])
     assert code == 2
-    assert 'reference_air_23mm has none' in capsys.readouterr().err
+    assert 'no spread in the scene of reference_air_23mm' in capsys.readouterr().err
 
 
 def test_compare_writes_into_compare_here_unless_told(tmp_path, monkeypatch, capsys):
