@@ -29,12 +29,13 @@ FIT_END_SIGMAS = 15.0
 #: The instability rates tried reach this many per rise time (the rise: crossing to fit end).
 MAX_RATE_PER_RISE = 8.0
 RATES_TRIED = 30
-#: Candidate starts per frame.
-STARTS_PER_FRAME = 1
+#: Candidate starts: one a frame, or this many over the frames fitted if that is fewer.
+MAX_STARTS = 400
 MIN_FRAMES_AFTER = 5
-#: A departure slower than this many frames from crossing to fit end is not a released arm's
-#: run-away (the real robot's arm can creep off its latch for most of a second): not fitted.
-MAX_RISE_FRAMES = 80
+#: A departure slower than this from crossing to fit end is not a released arm's run-away (it
+#: takes ~1.5 ms on the simulated robot; the real robot's arm can creep off its latch for most
+#: of a second): not fitted.
+MAX_RISE_S = 0.01
 #: Residuals above this many times the frames' noise variance: the form does not describe
 #: the departure, and the level crossing stands.
 MAX_RESIDUAL_VARIANCE_RATIO = 2.0
@@ -72,18 +73,20 @@ def unlatch_onset(t: np.ndarray, arm_raw_rad: np.ndarray, arm_smoothed_rad: np.n
     ``arm_raw_rad``: the arm's angle to the body per frame (it rises off the latch);
     ``arm_smoothed_rad`` the same smoothed, to find where the fitted frames end; ``noise_rad``
     its per-frame noise; ``i_end``: the frames fitted end before it (the strike). None where
-    the departure is not a released arm's: not seen rising after the crossing, rising over
-    more than MAX_RISE_FRAMES, or not of the form (residuals over
+    the departure is not a released arm's: not seen rising after the crossing, rising for
+    longer than MAX_RISE_S, or not of the form (residuals over
     MAX_RESIDUAL_VARIANCE_RATIO noise variances, or a start at the first frame tried)."""
     i_cross = int(np.searchsorted(t, crossing_s))
     if not noise_rad > 0 or i_cross >= i_end:
         return None
     level = arm_smoothed_rad[i_cross] + FIT_END_SIGMAS * noise_rad
     above = np.nonzero(arm_smoothed_rad[i_cross:i_end] > level)[0]
-    if len(above) == 0 or not MIN_FRAMES_AFTER <= above[0] <= MAX_RISE_FRAMES:
+    if len(above) == 0 or above[0] < MIN_FRAMES_AFTER:
         return None
     j_end = i_cross + int(above[0])
     rise_s = t[j_end] - t[i_cross]
+    if rise_s > MAX_RISE_S:
+        return None
     i_start = int(np.searchsorted(t, crossing_s - LOOKBACK_RISES * rise_s))
     frame_s = float(np.median(np.diff(t[i_start:j_end + 1])))
     tau = t[i_start:j_end + 1] - crossing_s
@@ -92,7 +95,7 @@ def unlatch_onset(t: np.ndarray, arm_raw_rad: np.ndarray, arm_smoothed_rad: np.n
     tau, y = tau[tracked], y[tracked]
     if len(y) < 2 * MIN_FRAMES_AFTER:
         return None
-    starts = np.arange(tau[0], frame_s, frame_s / STARTS_PER_FRAME)
+    starts = np.arange(tau[0], frame_s, max(frame_s, (frame_s - tau[0]) / MAX_STARTS))
     rates = np.linspace(0.0, MAX_RATE_PER_RISE / rise_s, RATES_TRIED)
     sse = np.full(len(starts), np.inf)
     best_rate = np.zeros(len(starts))
