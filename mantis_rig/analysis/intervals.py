@@ -82,30 +82,29 @@ def value_of(summary: dict, key: str) -> float:
 
 
 def track_intervals(tracks: MarkerTracks, result: TrialAnalysis, replicas: int,
-                    seed: int = 0) -> Intervals:
-    """The intervals of ``result``, the analysis of ``tracks`` (with its own parameters)."""
+                    seed: int = 0, on_analysis=None) -> Intervals:
+    """The intervals of ``result``, the analysis of ``tracks`` (with its own parameters).
+    ``on_analysis(done, total)`` is called as each of the analyses they take finishes."""
     params = result.params
     rng = np.random.default_rng(seed)
     step_mm = coordinate_resolution_mm(tracks)
-    failed = 0
-    noisy = []
     # The unlatching's noise interval is its fit's own (below): the replicas need not fit it.
     retracked = replace(params, fit_unlatch_onset=False)
-    for _ in range(replicas):
-        copy = _tracked_again(tracks, rng, step_mm)
-        summary = _summary_or_none(lambda c=copy: analyze_tracks(c, retracked))
-        failed += summary is None
-        if summary is not None:
-            noisy.append(summary)
-    linkage, angles = result.linkage, result.angles      # the trial's own fit
-    chosen = []
-    for run in _choices(tracks, params, linkage, angles):
-        summary = _summary_or_none(run)
-        failed += summary is None
-        if summary is not None:
-            chosen.append(summary)
+    choices = list(_choices(tracks, params, result.linkage, result.angles))  # the trial's fit
+    summaries = []
+    for done in range(1, replicas + len(choices) + 1):
+        if done <= replicas:    # one copy of the markers at a time; tracks on no grid refused
+            copy = _tracked_again(tracks, rng, step_mm)
+            summaries.append(_summary_or_none(lambda c=copy: analyze_tracks(c, retracked)))
+        else:
+            summaries.append(_summary_or_none(choices[done - replicas - 1]))
+        if on_analysis is not None:
+            on_analysis(done, replicas + len(choices))
+    failed = sum(s is None for s in summaries)
+    noisy = [s for s in summaries[:replicas] if s is not None]
+    chosen = [s for s in summaries[replicas:] if s is not None]
     trial = result.summary()
-    resolution = _resolutions(tracks, params, trial, linkage, result.unlatch_onset)
+    resolution = _resolutions(tracks, params, trial, result.linkage, result.unlatch_onset)
     out, open_below = {}, []
     for key in QUANTITIES:
         value = value_of(trial, key)

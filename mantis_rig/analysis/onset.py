@@ -31,6 +31,7 @@ MAX_RATE_PER_RISE = 8.0
 RATES_TRIED = 30
 #: Candidate starts: one a frame, or this many over the frames fitted if that is fewer.
 MAX_STARTS = 400
+#: Fewer frames of rise than this after the crossing: too few to fit its form.
 MIN_FRAMES_AFTER = 5
 #: A departure slower than this from crossing to fit end is not a released arm's run-away (it
 #: takes ~1.5 ms on the simulated robot; the real robot's arm can creep off its latch for most

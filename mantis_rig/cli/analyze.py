@@ -70,6 +70,20 @@ def _print_text(report):
     print('\n'.join(lines))
 
 
+def _analyses_shown(stream=None):
+    """On a terminal, a line counting the intervals' analyses (about a second each); on
+    anything else (a log, a pipe) nothing."""
+    stream = stream if stream is not None else sys.stderr
+    if not stream.isatty():
+        return None
+
+    def show(done: int, total: int) -> None:
+        stream.write(f'\ranalyze: intervals, analysis {done} of {total}'
+                     + ('\n' if done == total else ''))
+        stream.flush()
+    return show
+
+
 def _interval_lines(intervals: dict, by_departure: bool) -> list[str]:
     from ..analysis.intervals import QUANTITIES
     lines = [f'{100 * intervals["level"]:.0f} % intervals (tracking noise: '
@@ -127,7 +141,7 @@ def _analyze_one(args) -> int:
     if args.intervals:
         from ..analysis.intervals import track_intervals
         report['intervals'] = track_intervals(trial.tracks, analysis, args.intervals,
-                                              args.seed).to_json()
+                                              args.seed, _analyses_shown()).to_json()
     if args.plot:
         from ..analysis.plots import plot_trial
         plot_trial(analysis, args.plot, title=Path(args.path).name)

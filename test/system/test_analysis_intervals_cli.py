@@ -55,3 +55,11 @@ def test_analyze_gives_each_number_its_interval(strike_file, capsys):
     assert report['unlatch_method'] == 'level crossing' and intervals['open_below'] == []
     assert '(II: its level crossing)' in text
     assert 'the interval of its level crossing; the arm leaves the latch earlier' in text
+
+
+def test_the_intervals_count_their_analyses_as_they_go(strike_file):
+    from mantis_rig.analysis.intervals import track_intervals
+    tracks = load_tracks(strike_file)
+    counted = []
+    track_intervals(tracks, analyze_tracks(tracks), 2, on_analysis=lambda *n: counted.append(n))
+    assert counted == [(done, 8) for done in range(1, 9)]       # 2 re-trackings, 6 choices

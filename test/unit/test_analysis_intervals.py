@@ -42,3 +42,20 @@ def test_a_re_tracking_keeps_the_step_and_the_lost_positions():
     assert np.mean(deviation ** 2) == pytest.approx(1 / 12 + 0.09, rel=0.25)
     with pytest.raises(InputError, match='show no tracker step'):
         _tracked_again(tracks, np.random.default_rng(2), 0.0)
+
+
+def test_a_terminal_sees_the_analyses_counted_and_a_log_does_not():
+    import io
+
+    from mantis_rig.cli.analyze import _analyses_shown
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+    terminal = Terminal()
+    show = _analyses_shown(terminal)
+    for done in (1, 2, 3):
+        show(done, 3)
+    assert terminal.getvalue() == ''.join(f'\ranalyze: intervals, analysis {n} of 3'
+                                          for n in (1, 2, 3)) + '\n'
+    assert _analyses_shown(io.StringIO()) is None
