@@ -89,10 +89,18 @@ def truth_of(world: World) -> StrikeTruth:
                        batch['peak_tip_speed_mps'])
 
 
+def analysis_params(scene: Scene):
+    """The parameters `mantis analyze` takes for a bag of this scene: the scene's, with the
+    guide distance and contact angle its trial conditions record."""
+    g = scene.geometry
+    return params_for_trial({'scene': scene.name, 'd_t_mm': g.d_t_mm,
+                             'contact_angle_deg': g.latched_angle_deg})[0]
+
+
 def film_errors(world: World, truth: StrikeTruth, frame_rate_hz: float,
                 frame_phase: float, before_s: float = 0.3) -> FilmErrors:
     """Analyse one film as `mantis analyze` analyses a bag of this scene; errors vs truth."""
-    params, _ = params_for_trial({'scene': world.scene.name})
+    params = analysis_params(world.scene)
     summary = analyze_tracks(film(world, frame_rate_hz, frame_phase, before_s),
                              params).summary()
     starts = summary['phase_start_s']
@@ -137,13 +145,14 @@ class IntervalCoverage:
 
 
 def interval_coverage(scene_name: str = 'air_23mm_rig', films: int = 20,
-                      replicas: int = 30) -> IntervalCoverage:
-    """One strike of the scene filmed ``films`` times, each analysed with its intervals."""
+                      replicas: int = 30, overrides: tuple = ()) -> IntervalCoverage:
+    """One strike of the scene (with ``overrides``, KEY=VALUE) filmed ``films`` times, each
+    analysed with its intervals."""
     from .intervals import QUANTITIES, track_intervals, value_of
-    scene = load_scene(scene_name)
+    scene = load_scene(scene_name, list(overrides))
     world = run_strike(scene)
     truth = truth_of(world)
-    params, _ = params_for_trial({'scene': scene.name})
+    params = analysis_params(scene)
     true = {'peak_tip_speed_mps': truth.peak_tip_speed_mps,
             'max_spring_energy_mJ': simulate(scene).metrics['max_spring_energy_mJ'],
             **{f'phase_start_s.{p}': truth.phase_start_s[p] for p in PHASES}}
