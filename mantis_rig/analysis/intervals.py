@@ -19,6 +19,9 @@ leave uncertain in the peak tip speed, the most spring energy and the phase star
   frame either side; the spring energy by what the body angle's quantisation floor moves it.
 - **The unlatching** is fitted by the form of the arm's departure (analysis.onset): its noise
   interval is that fit's profile likelihood, not the replicas', and it is not found on a frame.
+- **The start of IV**, where it was extrapolated back along θ̇1's rise with a tangent, which a
+  convex rise puts late: the interval reaches back to the earliest the convexity from
+  overcentering on allows (phases.max_contraction_earliest).
 
 The interval's level is LEVEL (80 %). A replica or a choice whose analysis fails (no strike
 found in it, say) is counted and left out.
@@ -41,9 +44,10 @@ LEVEL = 0.8
 #: The tracker's jitter in units of its step (mantis_sim.parameters.Camera: 0.03 px / 0.1 px).
 TRACKING_NOISE_STEPS = 0.3
 UNLATCHING = 'phase_start_s.II'
+MAX_CONTRACTION = 'phase_start_s.IV'
 #: The reported quantities: summary key (a dotted one is nested) -> unit.
 QUANTITIES = {'peak_tip_speed_mps': 'm/s', 'max_spring_energy_mJ': 'mJ',
-              UNLATCHING: 's', 'phase_start_s.III': 's', 'phase_start_s.IV': 's'}
+              UNLATCHING: 's', 'phase_start_s.III': 's', MAX_CONTRACTION: 's'}
 # Each estimator choice and its alternatives (the defaults' half and double, or about so).
 SMOOTHING_PRECISION = (0.5, 2.0)              # x AnalysisParams.rel_precision
 STRIKE_WINDOW_SHARE = (1.0 / 10.0, 1.0 / 5.0)  # against the default 1/7
@@ -117,6 +121,9 @@ def track_intervals(tracks: MarkerTracks, result: TrialAnalysis, replicas: int,
         out[key] = _interval(value, noise, [value_of(s, key) for s in chosen
                                             if _same_method(s, trial, key)],
                              resolution.get(key, 0.0))
+        earliest = result.max_contraction_earliest_s
+        if key == MAX_CONTRACTION and earliest < out[key].low:
+            out[key] = replace(out[key], low=earliest)
     return Intervals(out, replicas, len(chosen), failed, tuple(open_below))
 
 

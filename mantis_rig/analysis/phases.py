@@ -66,6 +66,35 @@ def loading_rate(t: np.ndarray, theta1_rad: np.ndarray, i_strike: int,
     return float(np.polyfit(t[lo:hi] - t[hi - 1], theta1_rad[lo:hi], 1)[0])
 
 
+@dataclass(frozen=True)
+class BandExits:
+    """Where θ̇1 leaves its hysteresis band ±b round the turn (see :func:`max_contraction`)."""
+
+    below_s: float              # the last exit below -b before the strike
+    above_s: float              # the first exit above +b after it
+    i_above: int                # the first frame above +b
+    band_radps: np.ndarray      # b at each frame
+    resolved: bool              # the loading is faster than the band: the turn is seen
+
+
+def band_exits(t: np.ndarray, omega1_radps: np.ndarray, omega1_noise_radps: np.ndarray,
+               i_strike: int, loading_rate_radps: float = float('nan')) -> BandExits:
+    band = DETECTION_SIGMAS * omega1_noise_radps
+    loading = np.nonzero(omega1_radps[:i_strike] < -band[:i_strike])[0]
+    if len(loading) == 0:
+        raise ValueError('θ̇1 is never clearly negative before the strike: no loading seen')
+    i_neg = int(loading[-1])
+    t_neg = _interp_crossing(t, omega1_radps + band, i_neg)
+    rising = np.nonzero(omega1_radps[i_neg:i_strike + 1] > band[i_neg:i_strike + 1])[0]
+    if len(rising) == 0:
+        raise ValueError('θ̇1 never turns clearly positive after the loading: the frames do '
+                         'not hold the strike (the spring never releases in them)')
+    i_pos = i_neg + int(rising[0])
+    t_pos = _interp_crossing(t, omega1_radps - band, i_pos - 1)
+    resolved = not np.mean(band[i_neg:i_pos + 1]) >= abs(loading_rate_radps)
+    return BandExits(t_neg, t_pos, i_pos, band, bool(resolved))
+
+
 def max_contraction(t: np.ndarray, omega1_radps: np.ndarray, omega1_noise_radps: np.ndarray,
                     i_strike: int, loading_rate_radps: float = float('nan'),
                     ) -> tuple[float, int]:
@@ -83,25 +112,35 @@ def max_contraction(t: np.ndarray, omega1_radps: np.ndarray, omega1_noise_radps:
     would fall far before the turn; then the crossing is extrapolated back from the rising
     side: the tangent of θ̇1 where it leaves the band, followed down to θ̇1 = 0.
     """
-    band = DETECTION_SIGMAS * omega1_noise_radps
-    loading = np.nonzero(omega1_radps[:i_strike] < -band[:i_strike])[0]
-    if len(loading) == 0:
-        raise ValueError('θ̇1 is never clearly negative before the strike: no loading seen')
-    i_neg = int(loading[-1])
-    t_neg = _interp_crossing(t, omega1_radps + band, i_neg)
-    rising = np.nonzero(omega1_radps[i_neg:i_strike + 1] > band[i_neg:i_strike + 1])[0]
-    if len(rising) == 0:
-        raise ValueError('θ̇1 never turns clearly positive after the loading: the frames do '
-                         'not hold the strike (the spring never releases in them)')
-    i_pos = i_neg + int(rising[0])
-    t_pos = _interp_crossing(t, omega1_radps - band, i_pos - 1)
-    if not np.mean(band[i_neg:i_pos + 1]) >= abs(loading_rate_radps):
-        t_iv = 0.5 * (t_neg + t_pos)          # resolved (or no loading rate to judge by)
+    exits = band_exits(t, omega1_radps, omega1_noise_radps, i_strike, loading_rate_radps)
+    if exits.resolved:                      # (or no loading rate to judge by)
+        t_iv = 0.5 * (exits.below_s + exits.above_s)
     else:
+        i_pos, band = exits.i_above, exits.band_radps
         slope = _rising_slope(t, omega1_radps, band, i_pos)
-        b = float(np.interp(t_pos, t[i_pos - 1:i_pos + 1], band[i_pos - 1:i_pos + 1]))
-        t_iv = max(t_neg, t_pos - b / slope) if slope > 0 else t_pos
+        b = float(np.interp(exits.above_s, t[i_pos - 1:i_pos + 1], band[i_pos - 1:i_pos + 1]))
+        t_iv = max(exits.below_s, exits.above_s - b / slope) if slope > 0 else exits.above_s
     return float(t_iv), int(np.argmin(np.abs(t - t_iv)))
+
+
+def max_contraction_earliest(t: np.ndarray, exits: BandExits, loading_rate_radps: float,
+                             overcentering_s: float) -> float:
+    """The earliest the turn can be where :func:`max_contraction` extrapolated it back along
+    θ̇1's rise (NaN where the midpoint stands, or overcentering is not before the exit).
+
+    The tangent it follows is late on a convex rise. From overcentering on, the tendon drives
+    the arm out and the body's deceleration only grows, so θ̇1 is convex from there through the
+    turn to the exit: it rises from the loading rate v at t_III to 0 at the turn t_IV, so its
+    slope at the turn is at least |v| / (t_IV − t_III), and it then reaches the band b at the
+    exit t_b no later than b (t_IV − t_III) / |v| after the turn. Hence
+    t_IV ≥ (|v| t_b + b t_III) / (|v| + b).
+    """
+    v = abs(loading_rate_radps)
+    if exits.resolved or not (v > 0 and overcentering_s < exits.above_s):
+        return float('nan')
+    i = exits.i_above
+    b = float(np.interp(exits.above_s, t[i - 1:i + 1], exits.band_radps[i - 1:i + 1]))
+    return float((v * exits.above_s + b * overcentering_s) / (v + b))
 
 
 def _rising_slope(t: np.ndarray, omega1_radps: np.ndarray, band: np.ndarray, i_pos: int,

@@ -116,6 +116,9 @@ class TrialAnalysis:
     # None where the frames could not hold the fit and the level crossing stands.
     unlatch_onset: Onset | None = None
     params: AnalysisParams | None = None            # what it was analysed with
+    # The earliest the start of IV can be where it was extrapolated back along θ̇1's rise
+    # (phases.max_contraction_earliest); NaN where not.
+    max_contraction_earliest_s: float = float('nan')
 
     @property
     def arm_ke_share_at_peak(self) -> float:
@@ -325,8 +328,9 @@ def _analyze(t: np.ndarray, theta1_raw: np.ndarray, theta3_raw: np.ndarray, L1_m
     arm_on_body = th3 - play        # the arm relative to the body: constant while latched
 
     i_strike = ph.strike_index(w_body)
-    t_iv, i_iv = ph.max_contraction(t, w_body, linear_rate_noise(sig_body, h_body, dt_s),
-                                    i_strike, ph.loading_rate(t, body_raw, i_strike))
+    rate_noise = linear_rate_noise(sig_body, h_body, dt_s)
+    v_load = ph.loading_rate(t, body_raw, i_strike)
+    t_iv, i_iv = ph.max_contraction(t, w_body, rate_noise, i_strike, v_load)
     turned = float(np.max(body[i_iv:]) - body[i_iv])
     if turned < MIN_STRIKE_ROTATION_RAD:
         raise ValueError(f'no strike: after its slowest point (t = {t_iv:.4f} s) the body '
@@ -381,6 +385,8 @@ def _analyze(t: np.ndarray, theta1_raw: np.ndarray, theta3_raw: np.ndarray, L1_m
         t_oc, oc_method = t_knee, 'trajectory knee'
     times = ph.PhaseTimes(t_load, t_unlatch if onset is None else onset.start_s, t_oc, t_iv,
                           t_peak, i_iv, i_peak)
+    iv_earliest = ph.max_contraction_earliest(
+        t, ph.band_exits(t, w_body, rate_noise, i_strike, v_load), v_load, t_oc)
     return TrialAnalysis(
         time_s=t, theta1_rad=th1, theta3_rad=th3, omega1_radps=w1, omega3_radps=w3,
         tip_speed_mps=tip,
@@ -390,6 +396,7 @@ def _analyze(t: np.ndarray, theta1_raw: np.ndarray, theta3_raw: np.ndarray, L1_m
         tendon_work_mJ=work, phases=times, L1_mm=float(L1_mm), contact_angle_rad=contact,
         overcentering_trajectory_s=t_knee, peak_tip_speed=v_peak, strike_half_width=strike_k,
         overcentering_method=oc_method, unlatch_onset=onset,
+        max_contraction_earliest_s=iv_earliest,
     )
 
 
