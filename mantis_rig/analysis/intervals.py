@@ -18,7 +18,7 @@ leave uncertain in the peak tip speed, the most spring energy and the phase star
 - **The resolution.** A phase start is found on the frames: its interval is widened by one
   frame either side; the spring energy by what the body angle's quantisation floor moves it.
 - **The unlatching** is fitted by the form of the arm's departure (analysis.onset): its noise
-  interval is that fit's profile likelihood, not the replicas', and it is not found on a frame.
+  interval is that fit's profile likelihood, not the replicas', found on the starts tried.
 - **The start of IV**, where it was extrapolated back along θ̇1's rise with a tangent, which a
   convex rise puts late: the interval reaches back to the earliest the convexity from
   overcentering on allows (phases.max_contraction_earliest).
@@ -129,14 +129,15 @@ def track_intervals(tracks: MarkerTracks, result: TrialAnalysis, replicas: int,
 
 def _resolutions(tracks: MarkerTracks, params: AnalysisParams, trial: dict, linkage,
                  onset) -> dict:
-    """What the recording resolves at best: a phase start found on the frames to a frame
-    (not the unlatching fitted by its departure's form, whose interval is the fit's); the
+    """What the recording resolves at best: a phase start found on the frames to a frame (the
+    unlatching fitted by its departure's form to the spacing of the starts tried); the
     spring energy, E = k (theta - rest)^2 / 2, to what the body angle's quantisation floor
     moves it, sqrt(2 k E) times that floor."""
     frame_s = float(np.median(np.diff(tracks.time_s)))
     energy = value_of(trial, 'max_spring_energy_mJ')
-    out = {key: frame_s for key, unit in QUANTITIES.items()
-           if unit == 's' and not (key == UNLATCHING and onset is not None)}
+    out = {key: frame_s for key, unit in QUANTITIES.items() if unit == 's'}
+    if onset is not None:
+        out[UNLATCHING] = onset.step_s
     if math.isfinite(energy) and energy > 0:
         out['max_spring_energy_mJ'] = (math.sqrt(2.0 * params.k_s_Nmm_per_rad * energy)
                                        * linkage.body_noise_floor_rad)

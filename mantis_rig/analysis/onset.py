@@ -29,6 +29,8 @@ FIT_END_SIGMAS = 15.0
 #: The instability rates tried reach this many per rise time (the rise: crossing to fit end).
 MAX_RATE_PER_RISE = 8.0
 RATES_TRIED = 30
+#: Golden-section steps refining each start's λ between its grid neighbours (0.62^20: 1e-4).
+GOLDEN_STEPS = 20
 #: Candidate starts: one a frame, or this many over the frames fitted if that is fewer.
 MAX_STARTS = 400
 #: Fewer frames of rise than this after the crossing: too few to fit its form.
@@ -49,6 +51,12 @@ class Onset:
     candidates_s: np.ndarray    # the starts tried, first to last
     profile: np.ndarray         # each one's residual sum of squares over the best's (variances)
 
+    @property
+    def step_s(self) -> float:
+        """The spacing of the starts tried: the start and its interval are found on them."""
+        return float(self.candidates_s[1] - self.candidates_s[0]) if len(self.candidates_s) > 1 \
+            else 0.0
+
     def interval(self, level: float) -> tuple[float, float, bool]:
         """The ``level`` profile-likelihood interval of the start, and whether the frames bound
         it below (False: its low end is the first start tried)."""
@@ -68,12 +76,14 @@ def departure_form(rate_per_s: float, tau_s: np.ndarray) -> np.ndarray:
 
 
 def unlatch_onset(t: np.ndarray, arm_raw_rad: np.ndarray, arm_smoothed_rad: np.ndarray,
-                  noise_rad: float, crossing_s: float, i_end: int) -> Onset | None:
+                  noise_rad: float, crossing_s: float, i_end: int,
+                  i_first: int = 0) -> Onset | None:
     """The start of the departure that the level crossing at ``crossing_s`` found late.
 
     ``arm_raw_rad``: the arm's angle to the body per frame (it rises off the latch);
     ``arm_smoothed_rad`` the same smoothed, to find where the fitted frames end; ``noise_rad``
-    its per-frame noise; ``i_end``: the frames fitted end before it (the strike). None where
+    its per-frame noise; ``i_end``: the frames fitted end before it (the strike), and begin
+    no earlier than ``i_first`` (the loading's start: the arm cannot leave before). None where
     the departure is not a released arm's: not seen rising after the crossing, rising for
     longer than MAX_RISE_S, or not of the form (residuals over
     MAX_RESIDUAL_VARIANCE_RATIO noise variances, or a start at the first frame tried)."""
@@ -88,7 +98,7 @@ def unlatch_onset(t: np.ndarray, arm_raw_rad: np.ndarray, arm_smoothed_rad: np.n
     rise_s = t[j_end] - t[i_cross]
     if rise_s > MAX_RISE_S:
         return None
-    i_start = int(np.searchsorted(t, crossing_s - LOOKBACK_RISES * rise_s))
+    i_start = max(int(np.searchsorted(t, crossing_s - LOOKBACK_RISES * rise_s)), i_first)
     frame_s = float(np.median(np.diff(t[i_start:j_end + 1])))
     tau = t[i_start:j_end + 1] - crossing_s
     y = arm_raw_rad[i_start:j_end + 1]
@@ -97,13 +107,7 @@ def unlatch_onset(t: np.ndarray, arm_raw_rad: np.ndarray, arm_smoothed_rad: np.n
     if len(y) < 2 * MIN_FRAMES_AFTER:
         return None
     starts = np.arange(tau[0], frame_s, max(frame_s, (frame_s - tau[0]) / MAX_STARTS))
-    rates = np.linspace(0.0, MAX_RATE_PER_RISE / rise_s, RATES_TRIED)
-    sse = np.full(len(starts), np.inf)
-    best_rate = np.zeros(len(starts))
-    for rate in rates:
-        found = _floor_and_form_sse(departure_form(rate, tau[None, :] - starts[:, None]), y)
-        better = found < sse
-        sse[better], best_rate[better] = found[better], rate
+    sse, best_rate = _profile_over_rates(tau, y, starts, MAX_RATE_PER_RISE / rise_s)
     i_best = int(np.argmin(sse))
     residual_variance = sse[i_best] / max(len(y) - 4, 1)
     if i_best == 0 or residual_variance > MAX_RESIDUAL_VARIANCE_RATIO * noise_rad ** 2:
@@ -112,6 +116,37 @@ def unlatch_onset(t: np.ndarray, arm_raw_rad: np.ndarray, arm_smoothed_rad: np.n
     variance = max(residual_variance, noise_rad ** 2)
     return Onset(start_s=crossing_s + float(starts[i_best]), rate_per_s=float(best_rate[i_best]),
                  candidates_s=crossing_s + starts, profile=(sse - sse[i_best]) / variance)
+
+
+def _profile_over_rates(tau: np.ndarray, y: np.ndarray, starts: np.ndarray,
+                        max_rate_per_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per candidate start: the least residual sum of squares over λ, and its λ. A grid of
+    RATES_TRIED rates, then a golden-section search between each start's best grid rate's
+    neighbours: the grid alone leaves the profile jagged by as much as the interval's cut."""
+    shifted = tau[None, :] - starts[:, None]
+
+    def sse_at(rate_per_start):
+        return _floor_and_form_sse(departure_form(rate_per_start[:, None], shifted), y)
+    rates = np.linspace(0.0, max_rate_per_s, RATES_TRIED)
+    grid = np.array([sse_at(np.full(len(starts), rate)) for rate in rates])
+    k = np.argmin(grid, axis=0)
+    low, high = rates[np.maximum(k - 1, 0)], rates[np.minimum(k + 1, RATES_TRIED - 1)]
+    ratio = (np.sqrt(5.0) - 1.0) / 2.0
+    c, d = high - ratio * (high - low), low + ratio * (high - low)
+    sse_c, sse_d = sse_at(c), sse_at(d)
+    for _ in range(GOLDEN_STEPS):
+        left = sse_c < sse_d                # the minimum lies in [low, d]; else in [c, high]
+        low, high = np.where(left, low, c), np.where(left, d, high)
+        new_c = np.where(left, high - ratio * (high - low), d)
+        new_d = np.where(left, c, low + ratio * (high - low))
+        fresh = sse_at(np.where(left, new_c, new_d))
+        sse_c, sse_d = np.where(left, fresh, sse_d), np.where(left, sse_c, fresh)
+        c, d = new_c, new_d
+    refined = np.minimum(sse_c, sse_d)
+    refined_rate = np.where(sse_c <= sse_d, c, d)
+    on_grid = grid[k, np.arange(len(starts))]
+    better = refined < on_grid
+    return np.where(better, refined, on_grid), np.where(better, refined_rate, rates[k])
 
 
 def _floor_and_form_sse(forms: np.ndarray, y: np.ndarray) -> np.ndarray:

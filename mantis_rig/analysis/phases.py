@@ -133,7 +133,9 @@ def max_contraction_earliest(t: np.ndarray, exits: BandExits, loading_rate_radps
     turn to the exit: it rises from the loading rate v at t_III to 0 at the turn t_IV, so its
     slope at the turn is at least |v| / (t_IV − t_III), and it then reaches the band b at the
     exit t_b no later than b (t_IV − t_III) / |v| after the turn. Hence
-    t_IV ≥ (|v| t_b + b t_III) / (|v| + b).
+    t_IV ≥ (|v| t_b + b t_III) / (|v| + b). This takes θ̇1 at overcentering to be the loading
+    rate (the body is still being loaded then: -0.215 against -0.216 rad/s on the simulated
+    rig); had the body already slowed, the bound would come out late.
     """
     v = abs(loading_rate_radps)
     if exits.resolved or not (v > 0 and overcentering_s < exits.above_s):

@@ -170,7 +170,7 @@ def analyze_linkage(tracks: MarkerTracks, linkage: LinkageFit, angles: JointAngl
     result = _analyze(angles.time_s, theta1, angles.theta3_rad, linkage.L1_mm, params,
                       linkage.angle_noise_floor_rad, body_raw=body,
                       body_floor_rad=linkage.body_noise_floor_rad)
-    result.linkage, result.angles, result.params = linkage, angles, params
+    result.linkage, result.angles = linkage, angles
     result.body_pivot_mm = pivot_in_frame(linkage.body_pivot_mm, tracks.handedness,
                                           params.pivot_frame)
     result.lost_frames_in_strike = check_strike_tracked(result, tracks.time_s)
@@ -348,7 +348,7 @@ def _analyze(t: np.ndarray, theta1_raw: np.ndarray, theta3_raw: np.ndarray, L1_m
         i_load = int(np.searchsorted(t, t_load))
     t_unlatch = ph.unlatch_time(t, arm_on_body, thr3, i_load, i_iv)
     i_unlatch = int(np.searchsorted(t, t_unlatch))
-    onset = (unlatch_onset(t, theta3_raw - play, arm_on_body, sig3, t_unlatch, i_iv)
+    onset = (unlatch_onset(t, theta3_raw - play, arm_on_body, sig3, t_unlatch, i_iv, i_load)
              if params.fit_unlatch_onset else None)
     # θ3's latched level: the arm rests on the body, a constant angle to it; to the link it
     # is that angle in the rest pose, where loading starts (while loading, the link turns
@@ -396,7 +396,7 @@ def _analyze(t: np.ndarray, theta1_raw: np.ndarray, theta3_raw: np.ndarray, L1_m
         tendon_work_mJ=work, phases=times, L1_mm=float(L1_mm), contact_angle_rad=contact,
         overcentering_trajectory_s=t_knee, peak_tip_speed=v_peak, strike_half_width=strike_k,
         overcentering_method=oc_method, unlatch_onset=onset,
-        max_contraction_earliest_s=iv_earliest,
+        max_contraction_earliest_s=iv_earliest, params=params,
     )
 
 
