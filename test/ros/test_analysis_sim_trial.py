@@ -144,7 +144,7 @@ def test_max_contraction_within_twelve_frames(trial, report):
     'crosses zero linearly against the unstable hinge): its first ~2 ms stay below the tracking '
     'noise, and a growing exponential shifted in time is the same curve scaled. The level '
     'crossing is ~45 frames late; fitting the departure\'s form (analysis.onset) puts this '
-    'trial\'s back to -2.3 frames, and -56 .. +19 over 48 frame phases (bench_sim_camera): '
+    'trial\'s back to -2.3 frames, and -41 .. +19 over 48 frame phases (bench_sim_camera): '
     'the noise does not pin the start to a frame'))
 def test_unlatching_within_one_frame(trial, report):
     _, truth, _ = trial
