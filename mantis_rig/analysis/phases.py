@@ -112,7 +112,12 @@ def max_contraction(t: np.ndarray, omega1_radps: np.ndarray, omega1_noise_radps:
     would fall far before the turn; then the crossing is extrapolated back from the rising
     side: the tangent of θ̇1 where it leaves the band, followed down to θ̇1 = 0.
     """
-    exits = band_exits(t, omega1_radps, omega1_noise_radps, i_strike, loading_rate_radps)
+    return turn_time(t, omega1_radps,
+                     band_exits(t, omega1_radps, omega1_noise_radps, i_strike, loading_rate_radps))
+
+
+def turn_time(t: np.ndarray, omega1_radps: np.ndarray, exits: BandExits) -> tuple[float, int]:
+    """:func:`max_contraction` from the band's exits already found."""
     if exits.resolved:                      # (or no loading rate to judge by)
         t_iv = 0.5 * (exits.below_s + exits.above_s)
     else:

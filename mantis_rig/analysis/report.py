@@ -330,7 +330,8 @@ def _analyze(t: np.ndarray, theta1_raw: np.ndarray, theta3_raw: np.ndarray, L1_m
     i_strike = ph.strike_index(w_body)
     rate_noise = linear_rate_noise(sig_body, h_body, dt_s)
     v_load = ph.loading_rate(t, body_raw, i_strike)
-    t_iv, i_iv = ph.max_contraction(t, w_body, rate_noise, i_strike, v_load)
+    exits = ph.band_exits(t, w_body, rate_noise, i_strike, v_load)
+    t_iv, i_iv = ph.turn_time(t, w_body, exits)
     turned = float(np.max(body[i_iv:]) - body[i_iv])
     if turned < MIN_STRIKE_ROTATION_RAD:
         raise ValueError(f'no strike: after its slowest point (t = {t_iv:.4f} s) the body '
@@ -385,8 +386,7 @@ def _analyze(t: np.ndarray, theta1_raw: np.ndarray, theta3_raw: np.ndarray, L1_m
         t_oc, oc_method = t_knee, 'trajectory knee'
     times = ph.PhaseTimes(t_load, t_unlatch if onset is None else onset.start_s, t_oc, t_iv,
                           t_peak, i_iv, i_peak)
-    iv_earliest = ph.max_contraction_earliest(
-        t, ph.band_exits(t, w_body, rate_noise, i_strike, v_load), v_load, t_oc)
+    iv_earliest = ph.max_contraction_earliest(t, exits, v_load, t_oc)
     return TrialAnalysis(
         time_s=t, theta1_rad=th1, theta3_rad=th3, omega1_radps=w1, omega3_radps=w3,
         tip_speed_mps=tip,

@@ -85,7 +85,7 @@ def _analyses_shown(stream=None):
 
 
 def _interval_lines(intervals: dict, by_departure: bool) -> list[str]:
-    from ..analysis.intervals import QUANTITIES
+    from ..analysis.intervals import QUANTITIES, UNLATCHING
     lines = [f'{100 * intervals["level"]:.0f} % intervals (tracking noise: '
              f'{intervals["replicas"]} replicas; the estimator\'s choices: '
              f'{intervals["choices"]}; docs/replay_analysis.md):']
@@ -98,7 +98,7 @@ def _interval_lines(intervals: dict, by_departure: bool) -> list[str]:
         before = 'at or before ' if key in intervals.get('open_below', ()) else ''
         lines.append(f'  {key:22s} {before}{entry["low"]:.{digits}f} .. '
                      f'{entry["high"]:.{digits}f} {unit}')
-        if key == 'phase_start_s.II' and not by_departure:
+        if key == UNLATCHING and not by_departure:
             lines.append('  (unlatching: the interval of its level crossing; the arm leaves the '
                          'latch earlier, by less than the frames resolve)')
     return lines

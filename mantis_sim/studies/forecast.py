@@ -79,7 +79,7 @@ def forecast_strikes(scenes: dict[str, Scene], strikes: Sequence[RealStrike], n:
             samples[metric] = values * factors[i].get(metric, 1.0)
         spread = spreads[strike.group]
         out.append(StrikeForecast(strike, samples, sum(s.status != 'strike' for s in sims),
-                                  spread.climatology, day_seen(spread, strike)))
+                                  spread.climatology, spread.knows_day(strike.recording_day)))
     return out
 
 
@@ -178,10 +178,6 @@ def _left_out(scenes: dict[str, Scene], latents: Sequence, param, n: int, seed: 
     return out
 
 
-def day_seen(spread: Spread, strike: RealStrike) -> bool:
-    """Whether the spread knows the strike's recording day (and forecasts from its assembly)."""
-    return spread.knows_day(strike.recording_day)
 
-
-__all__ = ['FORECAST_METRICS', 'INTERVALS', 'StrikeForecast', 'day_seen', 'forecast_strikes',
+__all__ = ['FORECAST_METRICS', 'INTERVALS', 'StrikeForecast', 'forecast_strikes',
            'left_out_days', 'left_out_strikes', 'prediction_rows', 'scores', 'strike_rng']
