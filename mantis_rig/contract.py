@@ -103,6 +103,7 @@ PACING_SUFFIX = 'pacing'
 TRIAL_CLIENT_NODE = 'mantis_trial_client'
 LIVE_RELAY_NODE = 'mantis_live'
 REPLAY_NODE = 'mantis_replay'
+STUDY_NODE = 'mantis_study'
 #: `ros2 run mantis_rig replay_node`
 REPLAY_NODE_EXECUTABLE = 'replay_node'
 TOOL_NODES = (TRIAL_CLIENT_NODE, LIVE_RELAY_NODE, REPLAY_NODE, REPLAY_NODE_EXECUTABLE)
@@ -193,7 +194,10 @@ CAMERA_TRIGGER = Service('camera/trigger', _TRIGGER, CAMERA_NODE, 'trigger now')
 START_TRIAL = Service('supervisor/start_trial', _TRIGGER, SUPERVISOR_NODE,
                       'run one trial; answers at once (the message names the bag)')
 ABORT = Service('supervisor/abort', _TRIGGER, SUPERVISOR_NODE, 'abort the running trial')
-SERVICES = (STAGE_HOME, STAGE_STOP, TARE, CAMERA_ARM, CAMERA_TRIGGER, START_TRIAL, ABORT)
+STUDY_CONTINUE = Service('study/continue', _TRIGGER, STUDY_NODE,
+                         '`mantis study` on hardware: go on with the next trial (as Enter does)')
+SERVICES = (STAGE_HOME, STAGE_STOP, TARE, CAMERA_ARM, CAMERA_TRIGGER, START_TRIAL, ABORT,
+            STUDY_CONTINUE)
 #: the Trigger services the supervisor calls on the device nodes
 DEVICE_SERVICES = (STAGE_HOME, STAGE_STOP, TARE, CAMERA_ARM, CAMERA_TRIGGER)
 
@@ -201,6 +205,8 @@ DEVICE_SERVICES = (STAGE_HOME, STAGE_STOP, TARE, CAMERA_ARM, CAMERA_TRIGGER)
 GET_STATE = 'get_state'
 CHANGE_STATE = 'change_state'
 SET_PARAMETERS = 'set_parameters'
+GET_PARAMETERS = 'get_parameters'
+SET_PARAMETERS_ATOMICALLY = 'set_parameters_atomically'
 TRANSITION_EVENT = 'transition_event'
 
 
@@ -273,6 +279,9 @@ class ParamSpec:
     choices: tuple | None = None
     at_configure: bool = False
     check: Callable | None = None
+    #: the default is the scene's own value (the node declares it once its scene is loaded);
+    #: ``default`` then only gives the type, and the published scene's value
+    from_scene: bool = False
 
     @property
     def low(self):
@@ -404,6 +413,19 @@ CAMERA_PARAMETERS = (
               '(Dev1/port0/line0) or a counter (Dev1/ctr0)', at_configure=True,
               check=_check_lines),
 )
+#: the trial conditions the simulated world builds each latching's robot from
+#: (mantis_sim.conditions); the supervisor sets them before each simulated trial, and the world
+#: takes them only while its robot is latched and unloaded
+WORLD_CONDITIONS = (
+    ParamSpec('d_t_mm', 23.0, 'mm', 'the robot\'s tendon guide distance from the body pivot '
+              '(geometry.d_t_mm); settable while the robot is latched and the stage has not '
+              'moved since', (1.0, 100.0), from_scene=True),
+    ParamSpec('contact_angle_deg', 3.0, 'deg', 'the robot\'s contact angle, as recorded (the '
+              'shim; geometry.contact_angle_deg): the arm sits at it + the latch offset drawn '
+              'from the spread; settable as d_t_mm', (0.0, 15.0), from_scene=True),
+    ParamSpec('medium', 'air', '', 'the medium the robot strikes in (medium.name and its '
+              'density); settable as d_t_mm', choices=MEDIA, from_scene=True),
+)
 WORLD_PARAMETERS = (
     ParamSpec('scene', DEFAULT_SCENE, '', 'mantis_sim scene name (see `mantis scenes`) or '
               'YAML path'),
@@ -421,6 +443,7 @@ WORLD_PARAMETERS = (
     ParamSpec('relatch', True, '', 'the operator re-latches the robot once the stage is back '
               'at its start after a strike (false: forgets, which the supervisor\'s latch '
               'check must catch)'),
+    *WORLD_CONDITIONS,
 )
 #: the supervisor's parameters: the trial conditions (CONDITION_KEYS), then the procedure
 SUPERVISOR_PARAMETERS = (
@@ -483,6 +506,8 @@ DOC_END = '<!-- contract: end -->'
 
 
 def _default_text(spec: ParamSpec) -> str:
+    if spec.from_scene:
+        return "the scene's"
     value = spec.default
     if isinstance(value, float) and math.isfinite(value) and value == int(value) \
             and abs(value) < 1e6:
@@ -514,7 +539,8 @@ def markdown() -> str:
               '|---|---|---|---|']
     lines += [f'| `{s.name}` | `{s.type_name}` | {s.server} | {s.doc} |' for s in SERVICES]
     lines += ['', 'And each node\'s standard ones: `<node>/get_state`, `<node>/change_state`, '
-              '`<node>/transition_event` (device nodes: lifecycle), `<node>/set_parameters`.',
+              '`<node>/transition_event` (device nodes: lifecycle), `<node>/set_parameters`, '
+              '`<node>/set_parameters_atomically`.',
               '', '### Nodes', '']
     lines += [f'- `{name}`' for name in RIG_NODES]
     lines += [f'- `{SIM_RIG_PROCESS}` (process): `{SIM_WORLD_NODE}` and the device nodes',

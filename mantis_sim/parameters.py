@@ -126,11 +126,17 @@ class Damping:
     arm_Nmm_ms_per_rad: float = param(4.0, 'N mm ms/rad', 'viscous damping on theta3', 0.0, 1e4)
 
 
+#: The media a robot strikes in and their densities (g/mm^3): the one table a medium's name is
+#: given its density from (mantis_sim.conditions). Water: 750 x air, as in the authors' fits.
+MEDIUM_DENSITIES_G_PER_MM3 = {'air': 1.225e-6, 'water': 750 * 1.225e-6, 'vacuum': 0.0}
+
+
 @dataclass(frozen=True)
 class Medium:
-    name: str = param('air', '', 'medium the robot strikes in', choices=('air', 'water', 'vacuum'))
-    density_g_per_mm3: float = param(1.225e-6, 'g/mm^3', 'fluid density (water: 750 x air, as '
-                                      'in the authors\' fits)', 0.0, 0.01)
+    name: str = param('air', '', 'medium the robot strikes in',
+                      choices=tuple(MEDIUM_DENSITIES_G_PER_MM3))
+    density_g_per_mm3: float = param(MEDIUM_DENSITIES_G_PER_MM3['air'], 'g/mm^3', 'fluid density '
+                                     '(water: 750 x air, as in the authors\' fits)', 0.0, 0.01)
     # At least 1e-9 m/s: its square enters the drag's |v| (FluidDrag); below ~1e-162 m/s that
     # square is 0.0 and a strip at rest divided zero by zero.
     regularisation_speed_m_per_s: float = param(

@@ -108,15 +108,20 @@ class SessionRobots:
         lat = model.latent
         self._day_level = None if lat is None else float(rng.normal(lat.mean, lat.day_sd))
 
-    def __call__(self, latching: int) -> Scene:
+    def __call__(self, latching: int, base: Scene | None = None) -> Scene:
+        """The robot of the n-th latching, drawn about ``base`` (default: the session's scene),
+        e.g. the scene at a trial's conditions (mantis_sim.conditions): the same draw for the
+        same latching whatever the base, kept within the latent's range for the base's
+        contact angle."""
+        base = self.scene if base is None else base
         values = dict(self._fixed)
         lat = self._model.latent
         if lat is not None:
             rng = np.random.default_rng([self.seed, latching])
-            lower, upper = self._model.latent_range(self.scene.geometry.contact_angle_deg)
+            lower, upper = self._model.latent_range(base.geometry.contact_angle_deg)
             values[lat.key] = float(np.clip(self._day_level + rng.normal(0.0, lat.strike_sd),
                                             lower, upper))
-        return self.scene.with_values(values) if values else self.scene
+        return base.with_values(values) if values else base
 
 
 __all__ = ['DESIGN_METRICS', 'DesignSpread', 'SessionRobots', 'design_spread', 'scene_spread',

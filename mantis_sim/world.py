@@ -28,6 +28,11 @@ unlatched, its arm free, and the tendon, which then only swings the free arm, ca
 tension (a simplification: the free arm's own hinge stiffness and weight are left out) while the
 arm stays where the strike left it. The supervisor's latch check is tried against that.
 
+Rebuilding the latched robot: before a trial pulls on it, the robot on the latch may be swapped
+for another (``rebuild_latched``: the trial's conditions, a guide moved, another shim), as a
+person sets the rig up before a trial. That is possible only while the robot is latched and
+unloaded, i.e. the stage has not moved since the latch; the latching keeps its number.
+
 Stage moves to a position (move_stage_to) are executed by the world, as the KDC101 executes
 MOT_MOVE_ABSOLUTE: a trapezoidal profile that ends at rest exactly on the target.
 
@@ -35,6 +40,7 @@ Units at this interface are SI (s, m, N); inside, mantis_sim's g, mm, ms.
 """
 from __future__ import annotations
 
+import bisect
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -55,6 +61,10 @@ SETTLE_AFTER_PEAK_MS = 20.0
 # The stage counts as back at its start (the robot can be re-latched) this close to it.
 RELATCH_TOLERANCE_MM = 0.01
 KEPT_STRIKES = 8                # the truths of this many past strikes stay readable
+
+
+class RobotInUse(SimulationError):
+    """The latched robot cannot be rebuilt now (it is loaded, or not latched); says why."""
 
 
 @dataclass(frozen=True)
@@ -113,6 +123,46 @@ class World:
     @property
     def _current(self) -> _Strike:
         return self._strikes[-1]
+
+    @property
+    def robot(self) -> Scene:
+        """The scene of the robot of the current latching (``scene`` is the first one's)."""
+        return self._current.scene
+
+    # --- the robot on the latch -------------------------------------------------------------
+    def rebuild_problem(self) -> str | None:
+        """Why the latched robot cannot be rebuilt now, or None if it can: it must be latched
+        and not loaded, i.e. the stage has not moved since the latch."""
+        current = self._current
+        if self.held:
+            return (f'the robot of latching {current.number} has struck and is not latched '
+                    f'again yet (the stage must rest back at its start first)')
+        if self._stage_moved_since(current.t0_ms):
+            return (f'the robot of latching {current.number} is loaded: the stage has moved '
+                    f'since it was latched at t = {current.t0_ms * 1e-3:.3f} s (a trial has '
+                    f'pulled on it)')
+        return None
+
+    def rebuild_latched(self, scene: Scene) -> None:
+        """Put ``scene``'s robot on the latch in place of the current one, in its start pose,
+        from now on: the same latching (its number kept), as a person sets the rig up before a
+        trial. RobotInUse (saying why) unless the robot is latched and unloaded
+        (:meth:`rebuild_problem`). The times before now stay the replaced robot's."""
+        problem = self.rebuild_problem()
+        if problem is not None:
+            raise RobotInUse(f'cannot rebuild the latched robot: {problem}')
+        current = self._current
+        strike = _Strike(scene, self._drive, self._t_ms, current.number)
+        if current.t0_ms == self._t_ms:      # nothing of the replaced robot to keep
+            self._strikes[-1] = strike
+        else:
+            self._strikes.append(strike)
+
+    def _stage_moved_since(self, t0_ms: float) -> bool:
+        """Whether the stage moved (or is commanded to) at any time from t0_ms on."""
+        knots = self._drive.knots
+        first = max(bisect.bisect_right(knots, t0_ms, key=lambda k: k[0]) - 1, 0)
+        return any(v != 0.0 or a != 0.0 for _, _, v, a in knots[first:])
 
     def set_stage_velocity(self, velocity_m_per_s: float) -> None:
         """Command the stage from now on (m/s equals mm/ms, the model's unit)."""

@@ -111,12 +111,13 @@ def stack_config(args):
             scene_overrides.append(item)
     conditions = {'out': str(args.out), 'backend': args.backend, 'scene': args.scene}
     if args.backend == 'sim':
+        from mantis_sim.conditions import conditions_of_scene
         from mantis_sim.scene import load_scene
         scene = load_scene(args.scene, scene_overrides)   # SceneError, ParameterError
-        conditions.update(pull_speed_mm_s=scene.drive.pull_speed_mm_per_s,
-                          medium=scene.medium.name, d_t_mm=scene.geometry.d_t_mm,
-                          # where the simulated arm rests: what the rig's user measures
-                          contact_angle_deg=scene.geometry.latched_angle_deg)
+        # the trial's conditions are the scene's (the contact angle as recorded: the arm sits
+        # at it + the latch offset the robots are drawn with); each set here (--set d_t_mm=19)
+        # the supervisor has the simulated world build its robot at (mantis_sim.conditions)
+        conditions.update(conditions_of_scene(scene))
     elif scene_overrides:
         raise ConditionError(f'unknown supervisor parameter(s) {scene_overrides} (scene '
                              f'parameters only apply to the sim backend)')
@@ -126,6 +127,11 @@ def stack_config(args):
     for key, value in conditions.items():
         check_value(key, value)
     TrialConditions.from_mapping(conditions).validate()
+    if args.backend == 'sim':
+        # conditions the simulated world could not build its robot at are bad input here,
+        # before anything starts (ParameterError, naming the condition and why)
+        from mantis_sim.conditions import scene_for_conditions
+        scene_for_conditions(scene, conditions)
     if args.namespace and not NAMESPACE.fullmatch(args.namespace):
         raise ConditionError(f'--namespace {args.namespace!r}: expected an absolute ROS '
                              f'namespace such as /rig2 (/-separated names of letters, digits '

@@ -2,7 +2,9 @@
 
 Every request returns a Pending at once, completed from the executor when the answer comes;
 the trial sequence waits on it (and can abort meanwhile). Stopping the stage never waits: it
-publishes velocity 0 and fires /stage/stop.
+publishes velocity 0 and fires /stage/stop. Parameters can be set on the device nodes and, in
+simulation, on the world (sim_world_node, the trial's conditions): the world takes its values
+all or none (its set_parameters_atomically), so a refusal leaves its robot as it was.
 """
 from __future__ import annotations
 
@@ -10,7 +12,7 @@ from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
-from rcl_interfaces.srv import SetParameters
+from rcl_interfaces.srv import SetParameters, SetParametersAtomically
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
@@ -23,6 +25,16 @@ TRANSITIONS = {'configure': Transition.TRANSITION_CONFIGURE,
                'activate': Transition.TRANSITION_ACTIVATE,
                'deactivate': Transition.TRANSITION_DEACTIVATE}
 SERVICE_WAIT_S = 10.0
+#: nodes whose parameters are set all or none
+ATOMIC_NODES = (contract.SIM_WORLD_NODE,)
+
+
+def _parameter_value(value) -> ParameterValue:
+    if isinstance(value, str):
+        return ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
+    if isinstance(value, bool):
+        return ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=value)
+    return ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=float(value))
 
 
 class RigClient:
@@ -40,6 +52,10 @@ class RigClient:
         self._set_parameters = {n: node.create_client(
             SetParameters, c.node_interface(n, c.SET_PARAMETERS), **group)
             for n in DEVICE_NODES}
+        # the world (simulation only: on hardware nothing serves it, and nothing calls it)
+        self._set_parameters_atomically = {n: node.create_client(
+            SetParametersAtomically, c.node_interface(n, c.SET_PARAMETERS_ATOMICALLY), **group)
+            for n in ATOMIC_NODES}
         self._velocity = node.create_publisher(Float64, c.VELOCITY_COMMAND.name,
                                                c.VELOCITY_COMMAND.qos.publisher())
         self._position = node.create_publisher(Float64, c.POSITION_COMMAND.name,
@@ -71,17 +87,26 @@ class RigClient:
             contract.CAMERA_WINDOW_PARAMETERS, (frame_rate_hz, pre_trigger_s, post_trigger_s))))
 
     def set_parameters(self, node_name: str, values: dict) -> Pending:
-        """Set float parameters of a device node; (all set, the refusals' reasons)."""
-        request = SetParameters.Request()
-        for name, value in values.items():
-            request.parameters.append(ParameterMsg(name=name, value=ParameterValue(
-                type=ParameterType.PARAMETER_DOUBLE, double_value=float(value))))
+        """Set parameters of a device node or the world (strings as strings, booleans as
+        booleans, numbers as doubles); (all set, the refusals' reasons). The world's are set
+        all or none."""
+        parameters = [ParameterMsg(name=name, value=_parameter_value(value))
+                      for name, value in values.items()]
+        if node_name in ATOMIC_NODES:
+            def answer_all(response):
+                result = response.result
+                return (result.successful, '' if result.successful
+                        else f'{node_name}: {result.reason}')
+            return self._request(self._set_parameters_atomically[node_name],
+                                 SetParametersAtomically.Request(parameters=parameters),
+                                 answer_all)
 
         def answer(response):
             refused = [f'{node_name} {p.name}: {r.reason}'
-                       for p, r in zip(request.parameters, response.results) if not r.successful]
+                       for p, r in zip(parameters, response.results) if not r.successful]
             return (not refused, '; '.join(refused))
-        return self._request(self._set_parameters[node_name], request, answer)
+        return self._request(self._set_parameters[node_name],
+                             SetParameters.Request(parameters=parameters), answer)
 
     def move_at(self, velocity_m_per_s: float) -> None:
         self._velocity.publish(Float64(data=float(velocity_m_per_s)))

@@ -17,6 +17,10 @@ started: ``SessionState``) before it takes up slack, and after any end, an abort
 back there, unless the stack is shutting down. A robot that struck must be re-latched by hand:
 the trial then ends in ``waiting_for_relatch``. A robot that is not latched is caught while
 taking up slack: the tendon stays slack over ``latch_check_mm`` of take-up.
+
+In simulation the trial's conditions (d_t_mm, contact_angle_deg, medium) are first set on the
+simulated world, which builds the latched robot from them; one it cannot apply ends the trial
+before anything moves, with the world's reason.
 """
 from __future__ import annotations
 
@@ -32,9 +36,11 @@ from mantis_rig.contract import (
     DEVICE_NODES,
     FORCE_CEILING_NAME,
     FORCE_GUARD_NODES,
+    SIM_WORLD_NODE,
     STAGE_HOME,
     STAGE_NODE,
     TARE,
+    WORLD_CONDITIONS,
 )
 
 from .conditions import TrialConditions
@@ -61,6 +67,9 @@ QUERY_RETRY_S = 5.0              # an idempotent query unanswered this long is s
 STOP_CONFIRM_S = 2.0             # after an abort, wait this long for the stage to report rest
 TRANSITION_GOALS = {'configure': 'inactive', 'activate': 'active', 'deactivate': 'inactive'}
 RELATCH_REASON = 're-latch the robot, then start the next trial'
+#: the trial conditions the simulated world builds its robot from (d_t_mm, contact_angle_deg,
+#: medium; the pull speed is the stage's to command)
+WORLD_CONDITION_NAMES = tuple(spec.name for spec in WORLD_CONDITIONS)
 
 
 class SessionState:
@@ -309,6 +318,8 @@ class TrialSequence:
         # Simulated: the rig's clock is the world's (/clock); before its first tick it reads 0
         # and nothing logged or timed would be on the world's time.
         self._wait(lambda: self.rig.now_s() > 0.0, 'the rig clock (simulated: /clock)')
+        if self.conditions.backend == 'sim':
+            self._simulate_the_conditions()
         for node in DEVICE_NODES:
             label = self._device_state(node)
             steps = {'unconfigured': ('configure', 'activate'), 'inactive': ('activate',),
@@ -332,6 +343,28 @@ class TrialSequence:
                        + self._device_hint(node))
         self.session.devices_in_error -= self._reset_devices
         self._active_devices = True
+
+    def _simulate_the_conditions(self) -> None:
+        """Simulated: before anything moves, the world builds the latched robot at the trial's
+        conditions (the ones the bag records); one it cannot apply (its robot already loaded,
+        a scene that cannot take them) ends the trial, so that nothing is recorded as if it
+        had been simulated."""
+        c = self.conditions
+        values = {name: getattr(c, name) for name in WORLD_CONDITION_NAMES}
+        # the first call of a trial to the rig: a reply lost while DDS still matches a process
+        # that has just started is asked for again (setting the same values again is accepted)
+        deadline = time.monotonic() + c.phase_timeout_s
+        while True:
+            pending = self.rig.set_parameters(SIM_WORLD_NODE, values)
+            if self._wait_for(pending.done, min(QUERY_RETRY_S, deadline - time.monotonic())):
+                break
+            if time.monotonic() >= deadline:
+                self._fail(f'timeout: {SIM_WORLD_NODE} taking the trial\'s conditions (state '
+                           f'{self.state})')
+        ok, message = pending.value()
+        if not ok:
+            self._fail(f'the simulated world could not apply the trial\'s conditions: '
+                       f'{message}')
 
     def _device_state(self, node: str) -> str:
         """The node's lifecycle state label. A query that goes unanswered is sent again: a

@@ -10,6 +10,7 @@ from mantis_rig.contract import (
     CAMERA_NODE,
     FORCE_CEILING_NAME,
     LOADCELL_NODE,
+    SIM_WORLD_NODE,
     STAGE_NODE,
     SUPERVISOR_STATE,
     resolve,
@@ -115,8 +116,10 @@ class FakeRig:
         return Pending((True, ''), done=True)
 
     def set_parameters(self, node, values):
-        # what each node was given, and in which lifecycle state
-        self.parameters.setdefault(node, []).append((dict(values), self.lifecycle[node]))
+        # what each node was given, and in which lifecycle state (the world has none)
+        self.parameters.setdefault(node, []).append((dict(values), self.lifecycle.get(node)))
+        if node in self.refuse:
+            return Pending((False, self.refuse[node]), done=True)
         return Pending((True, ''), done=True)
 
     def move_at(self, v):
@@ -232,8 +235,48 @@ def test_force_ceiling_aborts_and_stops_the_stage():
 def test_the_trials_force_ceiling_is_set_on_every_guard_before_it_is_configured():
     rig, _, outcome = run_trial(force_ceiling_n=12.5)
     assert outcome['result'] == 'aborted'
-    assert rig.parameters == {STAGE_NODE: [({FORCE_CEILING_NAME: 12.5}, 'unconfigured')],
-                              LOADCELL_NODE: [({FORCE_CEILING_NAME: 12.5}, 'unconfigured')]}
+    assert rig.parameters == {
+        SIM_WORLD_NODE: [({'d_t_mm': 23.0, 'contact_angle_deg': 3.0, 'medium': 'air'}, None)],
+        STAGE_NODE: [({FORCE_CEILING_NAME: 12.5}, 'unconfigured')],
+        LOADCELL_NODE: [({FORCE_CEILING_NAME: 12.5}, 'unconfigured')]}
+
+
+def test_a_simulated_trial_sets_its_conditions_on_the_world_before_anything_else():
+    rig, _, outcome = run_trial(d_t_mm=19.0, contact_angle_deg=5.0, medium='water')
+    assert outcome['result'] == 'completed', outcome
+    assert rig.parameters[SIM_WORLD_NODE] == [
+        ({'d_t_mm': 19.0, 'contact_angle_deg': 5.0, 'medium': 'water'}, None)]
+    rig, _, outcome = run_trial(backend='hardware')       # no world on the real rig
+    assert SIM_WORLD_NODE not in rig.parameters
+
+
+def test_a_lost_answer_from_the_simulated_world_is_asked_for_again(monkeypatch):
+    from mantis_rig.trial import sequence as trial_sequence
+    monkeypatch.setattr(trial_sequence, 'QUERY_RETRY_S', 0.2)
+
+    class LosesTheWorldsFirstAnswer(FakeRig):
+        def set_parameters(self, node, values):
+            answer = super().set_parameters(node, values)
+            if node == SIM_WORLD_NODE and len(self.parameters[node]) == 1:
+                return Pending()                   # never answered
+            return answer
+    rig, _, outcome = run_trial(LosesTheWorldsFirstAnswer())
+    assert outcome['result'] == 'completed', outcome
+    assert len(rig.parameters[SIM_WORLD_NODE]) == 2
+
+
+def test_conditions_the_simulated_world_refuses_end_the_trial_before_anything_moves():
+    rig = FakeRig()
+    rig.refuse[SIM_WORLD_NODE] = ('sim_world_node: medium = vacuum: scene air_23mm_rig '
+                                  'simulates the fluid around the robot')
+    rig, seq, outcome = run_trial(rig, medium='vacuum')
+    assert outcome['result'] == 'aborted'
+    assert outcome['reason'] == ("the simulated world could not apply the trial's conditions: "
+                                 'sim_world_node: medium = vacuum: scene air_23mm_rig '
+                                 'simulates the fluid around the robot')
+    assert rig.states == ['configuring', 'aborted']
+    assert set(rig.lifecycle.values()) == {'unconfigured'}       # nothing brought up
+    assert abs(rig.pos - rig.origin) < 1e-9                      # nor moved
 
 
 def test_without_the_supervisors_monitor_the_ceiling_is_left_to_the_guards():
@@ -430,8 +473,10 @@ def test_supervisor_refuses_bad_input_with_the_reason(ros, tmp_path, monkeypatch
     assert bag.complete
     outcome = bag.metadata('trial_outcome')
     assert outcome['result'] == 'aborted'
-    assert outcome['reason'] == ('stage_node get_state failed: service /stage_node/get_state '
-                                 'is not available')
+    # a simulated trial sets its conditions on the world first: none here
+    assert outcome['reason'] == ("the simulated world could not apply the trial's conditions: "
+                                 'service /sim_world_node/set_parameters_atomically is not '
+                                 'available')
     assert bag.metadata('trial_conditions')['operator_note'] == 'no devices'
     states = [m.message.data for m in bag.messages([resolve(SUPERVISOR_STATE)])]
     assert states[-2:] == ['configuring', 'aborted']

@@ -146,6 +146,7 @@ def test_every_ros_name_the_document_mentions_is_the_contracts():
     text = DOC.read_text(encoding='utf-8')
     known = {contract.resolve(x) for x in (*contract.TOPICS, *contract.SERVICES)}
     standard = (contract.GET_STATE, contract.CHANGE_STATE, contract.SET_PARAMETERS,
+                contract.SET_PARAMETERS_ATOMICALLY,
                 contract.TRANSITION_EVENT)
     known |= {contract.resolve(contract.node_interface(n, s))
               for n in ('<node>', *contract.RIG_NODES) for s in standard}

@@ -55,3 +55,32 @@ def test_a_namespace_that_is_not_one_is_refused_naming_it(namespace, tmp_path):
     args = build_parser().parse_args(['bringup', '--namespace', namespace])
     with pytest.raises(ConditionError, match=f'--namespace {namespace!r}: expected an absolute'):
         cli_trial.stack_config(args)
+
+
+def _sim_config(tmp_path, *sets):
+    argv = ['trial', '--out', str(tmp_path)]
+    for item in sets:
+        argv += ['--set', item]
+    return cli_trial.stack_config(build_parser().parse_args(argv))
+
+
+def test_a_simulated_trial_records_the_scenes_conditions_unless_set(tmp_path):
+    """The contact angle is the scene's recorded one, not where the arm sits (contact angle +
+    latch offset): the simulated world builds its robot from what the supervisor records."""
+    shimmed = _sim_config(tmp_path, 'geometry.latch_offset_deg=2').supervisor
+    assert (shimmed['d_t_mm'], shimmed['contact_angle_deg'], shimmed['medium'],
+            shimmed['pull_speed_mm_s']) == (23.0, 3.0, 'air', 2.33)
+    assert _sim_config(tmp_path, 'd_t_mm=19', 'geometry.contact_angle_deg=5').supervisor[
+        'd_t_mm'] == 19.0
+    assert _sim_config(tmp_path, 'geometry.contact_angle_deg=5').supervisor[
+        'contact_angle_deg'] == 5.0
+
+
+def test_conditions_the_simulated_world_cannot_take_are_refused_before_the_start(tmp_path):
+    from mantis_sim.parameters import ParameterError
+    with pytest.raises(ParameterError, match='medium = vacuum: scene air_23mm_rig simulates '
+                                             'the fluid around the robot'):
+        _sim_config(tmp_path, 'medium=vacuum')
+    with pytest.raises(ParameterError, match='contact_angle_deg = 14.0: .* puts the latched '
+                                             'arm at 16 degrees'):
+        _sim_config(tmp_path, 'contact_angle_deg=14', 'geometry.latch_offset_deg=2')

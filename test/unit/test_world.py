@@ -4,12 +4,13 @@ import math
 import numpy as np
 import pytest
 
+from mantis_sim.conditions import scene_for_conditions
 from mantis_sim.drive import CommandedPull
 from mantis_sim.mechanism import Mechanism
 from mantis_sim.model import SimulationError
 from mantis_sim.results import simulate
 from mantis_sim.scene import load_scene
-from mantis_sim.world import SETTLE_AFTER_PEAK_MS, World
+from mantis_sim.world import SETTLE_AFTER_PEAK_MS, RobotInUse, World
 
 STEP_S = 0.01
 
@@ -320,3 +321,75 @@ def test_the_instant_of_the_relatch_is_readable():
     times = np.array(relatched + [now])
     assert np.all(np.isfinite(world.tendon_force_N(times)))
     assert np.all(np.isfinite(world.joint_angles_rad(times)[0]))
+
+
+# ------------------------------------------------------------------ rebuilding the latched robot
+def _pull_until_held(world, t, velocity=2.33e-3):
+    world.set_stage_velocity(velocity)
+    while not world.held:
+        t += STEP_S
+        world.advance_to(t)
+    return t
+
+
+def _at_rest_N(scene):
+    """The tension of a latched robot the stage has not pulled on."""
+    world = World(scene)
+    world.advance_to(0.1)
+    return world.tendon_force_N([0.05])[0]
+
+
+def test_the_latched_robot_is_rebuilt_while_unloaded_and_strikes_as_its_scene():
+    """Before a trial pulls, the robot on the latch may be set up anew (the trial's
+    conditions): the same latching, the new robot from its start pose; the time before stays
+    the old robot's. The rebuilt robot strikes as the batch simulation of its scene."""
+    scene = load_scene('air_23mm_rig')
+    other = scene_for_conditions(scene, {'d_t_mm': 19.0})
+    world = World(scene)
+    world.rebuild_latched(other)                      # at t = 0: nothing of the old one kept
+    assert len(world._strikes) == 1 and world.robot is other and world.strikes == 1
+    world.rebuild_latched(scene)
+    world.advance_to(0.5)
+    world.set_stage_velocity(0.0)                     # a stop is no motion
+    assert world.rebuild_problem() is None
+    world.rebuild_latched(other)
+    assert world.strikes == 1 and world.robot is other and world.scene is scene
+    world.advance_to(0.6)
+    before, after = world.tendon_force_N([0.25, 0.55])
+    assert before == pytest.approx(_at_rest_N(scene), rel=1e-6)
+    assert after == pytest.approx(_at_rest_N(other), rel=1e-6)
+    assert after != pytest.approx(before, rel=1e-3)      # d_t moves the preload
+    _pull_until_held(world, 0.6)
+    batch = simulate(other).metrics
+    strike = world.last_strike
+    assert strike.number == 1
+    assert strike.peak_time_s - 0.6 == pytest.approx(batch['peak_time_s'], abs=1e-5)
+    assert batch['peak_time_s'] != pytest.approx(simulate(scene).metrics['peak_time_s'],
+                                                 abs=1e-2)
+
+
+def test_a_loaded_or_struck_robot_is_not_rebuilt_and_a_relatched_one_is():
+    scene = load_scene('air_23mm_rig')
+    other = scene_for_conditions(scene, {'d_t_mm': 19.0})
+    world = World(scene)
+    start = world.stage_position_m()
+    world.advance_to(0.2)
+    world.set_stage_velocity(2.33e-3)                 # a trial pulls on it
+    assert 'is loaded: the stage has moved since it was latched' in world.rebuild_problem()
+    world.advance_to(0.3)
+    world.set_stage_velocity(0.0)                     # stopped again: still loaded
+    with pytest.raises(RobotInUse, match='cannot rebuild the latched robot: the robot of '
+                                         'latching 1 is loaded'):
+        world.rebuild_latched(other)
+    assert world.robot is scene
+    t = _pull_until_held(world, 0.3)
+    with pytest.raises(RobotInUse, match='has struck and is not latched again yet'):
+        world.rebuild_latched(other)
+    world.set_stage_velocity(0.0)
+    world.move_stage_to(start, 2.0e-3)
+    while world.strikes == 1:                          # back at its start: re-latched
+        t += STEP_S
+        world.advance_to(t)
+    assert world.rebuild_problem() is None
+    world.rebuild_latched(other)
+    assert world.strikes == 2 and world.robot is other
