@@ -9,6 +9,7 @@ from mantis_sim.model import SimulationError
 from ..errors import RIG_FAULT, USAGE_ERROR, InputError, RigFault
 from . import (
     analyze,
+    control,
     day_state,
     doctor,
     identify,
@@ -16,6 +17,7 @@ from . import (
     recover,
     replay,
     sim,
+    study,
     sweep,
     trial,
 )
@@ -42,6 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
     analyze.add_commands(commands)
     recover.add_commands(commands)
     trial.add_commands(commands)
+    control.add_commands(commands)
+    study.add_commands(commands)
     sweep.add_commands(commands)
     doctor.add_commands(commands)
     identify.add_commands(commands)

@@ -37,6 +37,7 @@ class Recorder:
         self.on_message = None     # optional hook: on_message(topic, data) before each write
         self.on_written = None     # optional hook: on_written(topic, data) after each write
         self._bag = None
+        self._names: dict[str, str] = {}     # contract name -> resolved, while recording
         self._subscriptions = []
         self._lock = threading.Lock()
 
@@ -51,6 +52,7 @@ class Recorder:
         for spec in self.topics:
             bag.add_topic(names[spec.name], spec.type_name, spec.qos.publisher())
         self.counts = {spec.name: 0 for spec in self.topics}
+        self._names = names
         self._bag = bag
         clock = self.clock
         for spec in self.topics:
@@ -78,6 +80,14 @@ class Recorder:
             self.counts[name] += 1
         if self.on_written is not None:
             self.on_written(name, data)
+
+    def record(self, name: str, data: bytes) -> None:
+        """Log ``data`` (serialized) on contract topic ``name`` as if heard now: a message its
+        publisher has not published yet (the supervisor's end state, published once the bag
+        is closed). BagClosedError once stopped."""
+        if self._bag is None:
+            raise BagClosedError(f'the recorder is not recording ({name})')
+        self._write(name, self._names[name], data, self.clock.now().nanoseconds)
 
     def stop(self) -> None:
         """Stop recording (the bag stays open: its owner closes it)."""

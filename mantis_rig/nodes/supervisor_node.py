@@ -2,8 +2,10 @@
 
 Services ``/supervisor/start_trial`` and ``/supervisor/abort`` (std_srvs/Trigger); state on
 ``/supervisor/state`` (std_msgs/String, transient local) and on ``/diagnostics``. One bring-up
-runs any number of trials: a start is refused until the previous trial has closed its log, and
-each trial starts from where the first one started (mantis_rig.trial.sequence.SessionState).
+runs any number of trials, each from where the first one started
+(mantis_rig.trial.sequence.SessionState). A trial's end (``done``, ``aborted``) is published once
+its log is closed (the bag holds that state too): whoever hears it can start the next trial and
+is never refused.
 A second abort while an aborted trial returns the stage stops it where it is. The trial
 conditions and procedure settings are parameters (mantis_rig.trial.conditions); they are
 fixed while a trial runs. Each trial is logged to its own bag directory under ``out``; the
@@ -29,7 +31,7 @@ from std_srvs.srv import Trigger
 
 from mantis_rig import contract
 from mantis_rig.contract import DEVICE_NODES
-from mantis_rig.recording import TRIAL_CONDITIONS, BagWriteError, BagWriter
+from mantis_rig.recording import TRIAL_CONDITIONS, BagClosedError, BagWriteError, BagWriter
 from mantis_rig.recording.force_block import force_block_from_msg
 from mantis_rig.recording.marker_block import marker_block_from_msg
 from mantis_rig.trial.conditions import PARAMETERS, ConditionError, TrialConditions, check_value
@@ -47,7 +49,10 @@ STATUS_NAME = f'{NODE_NAME}: trial'
 
 LOG_WRITE_FAILED = 'log write failed'     # how the abort reason of a failed log begins
 LOG_TAIL_WAIT_S = 2.0
-STILL_CLOSING = 'is still closing its log'    # how a start refused for that says so
+# A start asked for before the end was published (by a client that did not wait for it) is
+# refused with this in its reason.
+STILL_CLOSING = 'is still closing its log'
+END_STATES = ('done', 'aborted')        # held back until the trial's log is closed
 
 
 def left_active(state_label: str) -> str:
@@ -75,6 +80,19 @@ def bag_directory(out: str) -> Path:
     return path
 
 
+class _TrialPort:
+    """The rig as one trial's sequence sees it: the supervisor's RigClient, except that the
+    trial's states go to ``publish_state`` (SupervisorNode._trial_state, which knows whose
+    they are)."""
+
+    def __init__(self, rig: RigClient, publish_state):
+        self._rig = rig
+        self.publish_state = publish_state
+
+    def __getattr__(self, name):
+        return getattr(self._rig, name)
+
+
 class SupervisorNode(WithoutDefaultEventHandlers, Node):
     def __init__(self, node_name: str = NODE_NAME, **kwargs):
         super().__init__(node_name, **kwargs)
@@ -90,8 +108,13 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
         self.last_abort_reason = ''
         self._state, self._state_reason = 'idle', ''
         self._state_lock = threading.Lock()
-        self._final_state_bytes: bytes | None = None
-        self._final_state_logged = threading.Event()
+        # A start and a trial's end made public, one at a time: a client that heard the end
+        # finds the start accepted (taken before _state_lock, never after).
+        self._start_lock = threading.RLock()
+        self._log_closed = True            # the last trial's log is closed and its end public
+        self._end: tuple[str, str] | None = None     # its end, held until then
+        self._tail: DiagnosticArray | None = None    # the status that marks the log's tail
+        self._tail_logged = threading.Event()
 
         c = contract
         self._state_pub = self.create_publisher(String, c.SUPERVISOR_STATE.name,
@@ -168,12 +191,16 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
         return response
 
     def start_trial(self) -> tuple[bool, str]:
+        with self._start_lock:
+            return self._start_trial()
+
+    def _start_trial(self) -> tuple[bool, str]:
         previous = self.sequence
         if previous is not None and previous.running:
             return False, f'a trial is already in progress (state {previous.state})'
-        if previous is not None and not previous.finished.is_set():
-            return False, (f'trial {self.trials} {STILL_CLOSING} (state {previous.state}); '
-                           f'start again once it has')
+        if not self._log_closed:
+            return False, (f'trial {self.trials} {STILL_CLOSING} (it ended {previous.state}); '
+                           f'its end is published once it has')
         try:
             conditions = self.conditions()
             path = bag_directory(conditions.out)
@@ -187,10 +214,10 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
         bag.on_failure = self._on_log_failure
         self.bag, self.bag_path = bag, path
         self.trials += 1
-        self._final_state_bytes = None
-        self._final_state_logged.clear()
+        self._log_closed, self._end = False, None
         number = self.trials
-        sequence = TrialSequence(self.rig, conditions,
+        port = _TrialPort(self.rig, lambda state, reason: self._trial_state(number, state, reason))
+        sequence = TrialSequence(port, conditions,
                                  lambda outcome: self._close_log(outcome, number, bag, path),
                                  self.session)
         self.sequence = sequence
@@ -221,18 +248,51 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
             sequence.abort(reason, return_stage=False)
 
     def _close_log(self, outcome: dict, number: int, bag: BagWriter, path: Path) -> None:
-        """Close trial ``number``'s log ``bag`` (at ``path``), and say so in one line."""
-        if bag.failure is None:
-            self._final_state_logged.wait(LOG_TAIL_WAIT_S)
-        self.recorder.stop()
-        if self.bag is bag:
-            self.bag = None
-        bag.close(trial_outcome=outcome)
-        if outcome.get('result') == 'aborted':
-            self.last_abort_reason = outcome.get('reason', '')
+        """Close trial ``number``'s log ``bag`` (at ``path``) with its end state in it, then
+        publish that end (the next start is accepted from then on), and say so in one line."""
+        try:
+            if bag.failure is None:
+                self._await_log_tail()
+                self._log_end(bag)
+            self.recorder.stop()
+            if self.bag is bag:
+                self.bag = None
+            bag.close(trial_outcome=outcome)
+        finally:
+            if outcome.get('result') == 'aborted':
+                self.last_abort_reason = outcome.get('reason', '')
+            self._publish_end()
         self.get_logger().info(f'trial {number} {outcome.get("result")}: '
                                f'{outcome.get("reason") or "ok"}; log closed: {path}')
         release_freed_memory()
+
+    def _await_log_tail(self) -> None:
+        """Wait (LOG_TAIL_WAIT_S at most) until the recorder has logged a status published now:
+        what reached it before (the stage's last states) is then in the bag."""
+        array = self._diagnostics()
+        self._tail_logged.clear()
+        self._tail = array
+        if self._publish(self._diagnostics_pub, array):
+            self._tail_logged.wait(LOG_TAIL_WAIT_S)
+        self._tail = None
+
+    def _log_end(self, bag: BagWriter) -> None:
+        """Write the trial's end state into its bag, as the recorder would have heard it."""
+        if self._end is None:
+            return
+        try:
+            self.recorder.record(contract.SUPERVISOR_STATE.name,
+                                 serialize_message(String(data=self._end[0])))
+        except (BagClosedError, BagWriteError):   # on_failure has ended the trial: no more
+            pass
+
+    def _publish_end(self) -> None:
+        """The trial's log is closed: publish its end, and accept the next start."""
+        with self._start_lock:
+            end, self._end = self._end, None
+            self._log_closed = True
+            if end is not None:
+                self._publish_state(*end)
 
     def _on_recorded(self, topic: str, data: bytes) -> None:
         watched = self._watched.get(topic)
@@ -240,20 +300,41 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
             watched[1](deserialize_message(data, watched[0]))
 
     def _on_logged(self, topic: str, data: bytes) -> None:
-        if topic == contract.SUPERVISOR_STATE.name and data == self._final_state_bytes:
-            self._final_state_logged.set()
+        tail = self._tail
+        if tail is not None and topic == contract.DIAGNOSTICS.name \
+                and deserialize_message(data, DiagnosticArray) == tail:
+            self._tail_logged.set()
 
     # ------------------------------------------------------------------ state
+    def _trial_state(self, number: int, state: str, reason: str) -> None:
+        """A state of trial ``number``'s sequence: its end is held until its log is closed
+        (_publish_end); what it says after a later trial has started is not published."""
+        with self._start_lock:
+            if number != self.trials:
+                return
+            if state in END_STATES and not self._log_closed:
+                self._end = (state, reason)
+                return
+            self._publish_state(state, reason)
+
     def _publish_state(self, state: str, reason: str) -> None:
         with self._state_lock:
             self._state, self._state_reason = state, reason
-            msg = String(data=state)
-            if state in ('done', 'aborted'):
-                self._final_state_bytes = serialize_message(msg)
-            self._state_pub.publish(msg)
+            self._publish(self._state_pub, String(data=state))
         self._publish_diagnostics()
 
     def _publish_diagnostics(self) -> None:
+        self._publish(self._diagnostics_pub, self._diagnostics())
+
+    @staticmethod
+    def _publish(publisher, msg) -> bool:
+        try:
+            publisher.publish(msg)
+            return True
+        except RuntimeError:   # shutting down: rclpy's InvalidHandle / RCLError (its context gone)
+            return False
+
+    def _diagnostics(self) -> DiagnosticArray:
         state, reason = self._state, self._state_reason
         level = DiagnosticStatus.WARN if state == 'aborted' else DiagnosticStatus.OK
         values = {'state': state, 'reason': reason, 'last_abort_reason': self.last_abort_reason,
@@ -264,10 +345,7 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
             values=[KeyValue(key=k, value=v) for k, v in values.items()])
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
-        try:
-            self._diagnostics_pub.publish(array)
-        except RuntimeError:   # shutting down: rclpy's InvalidHandle / RCLError (its context gone)
-            pass
+        return array
 
     # ------------------------------------------------------------------ observations
     def _on_force(self, msg) -> None:
@@ -338,7 +416,7 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
 
     def shutdown_trial(self, reason: str = 'supervisor shutting down') -> None:
         """Abort a running trial; wait (briefly) for the log of the last trial to close: a
-        trial that has just reported 'done' may still be closing it."""
+        trial that has just ended may still be closing it."""
         sequence = self.sequence
         if sequence is None:
             return

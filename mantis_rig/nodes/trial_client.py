@@ -1,5 +1,10 @@
 """TrialClient: a small node that starts a trial through /supervisor/start_trial and follows
-/supervisor/state until the trial ends (for `mantis trial` and the tests).
+/supervisor/state until the trial ends, and sets the supervisor's parameters between trials
+(for `mantis trial`, `mantis start|abort|state`, studies and the tests).
+
+The supervisor publishes a trial's end (``done``, ``aborted``; ``waiting_for_relatch`` after a
+strike) once its log is closed, so a start asked for after hearing it is accepted: nothing here
+asks again.
 
 A service's answer can be lost: Fast DDS drops a response when the server has not yet matched the
 client's response reader (rmw_fastrtps waits about 100 ms, then "client will not receive
@@ -13,20 +18,39 @@ import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.node import Node
+from rclpy.parameter import parameter_value_to_python
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from mantis_rig import contract
+from mantis_rig.errors import StackError
+from mantis_rig.trial.conditions import PARAMETERS
 
 from .lean_node import WithoutDefaultEventHandlers
-from .supervisor_node import STATUS_NAME, STILL_CLOSING
+from .supervisor_node import STATUS_NAME
 
 ANSWER_GRACE_S = 2.0    # how long an answer is awaited before the supervisor's publications count
-# A trial reports 'done' or 'aborted' before its log is closed (the bag holds that state); a
-# start refused meanwhile is asked again for this long.
-CLOSING_WAIT_S = 15.0
-CLOSING_RETRY_S = 0.1
+END_STATES = ('done', 'aborted')
+
+
+def parameter_value(name: str, value) -> ParameterValue:
+    """``value`` as the supervisor declares parameter ``name``: a double (an int too), a
+    string or a bool; ValueError if it is none of that, KeyError for an unknown name."""
+    default = PARAMETERS[name].default
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise ValueError(f'{value!r} is not a boolean')
+        return ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=value)
+    if isinstance(default, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f'{value!r} is not a number')
+        return ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=float(value))
+    if not isinstance(value, str):
+        raise ValueError(f'{value!r} is not a string')
+    return ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
 
 
 class TrialClient(WithoutDefaultEventHandlers, Node):
@@ -38,11 +62,17 @@ class TrialClient(WithoutDefaultEventHandlers, Node):
         c = contract
         self._start = self.create_client(Trigger, c.START_TRIAL.name)
         self._abort = self.create_client(Trigger, c.ABORT.name)
+        self._set_parameters = self.create_client(
+            SetParameters, c.node_interface(c.SUPERVISOR_NODE, c.SET_PARAMETERS))
+        self._get_parameters = self.create_client(
+            GetParameters, c.node_interface(c.SUPERVISOR_NODE, c.GET_PARAMETERS))
         self.create_subscription(String, c.SUPERVISOR_STATE.name, self._on_state,
                                  c.SUPERVISOR_STATE.qos.subscriber())
         self.reason = ''            # the supervisor's reason for its state (its diagnostics)
         self.supervisor_trials: int | None = None     # trials it has started (its diagnostics)
         self.supervisor_bag = ''                      # its current or last bag (its diagnostics)
+        self.supervisor_status: dict[str, str] = {}   # all its diagnostics' values
+        self.reasons: dict[tuple[str, str], str] = {}  # (bag, state) -> its reason, as heard
         self.create_subscription(DiagnosticArray, c.DIAGNOSTICS.name, self._on_diagnostics,
                                  c.DIAGNOSTICS.qos.subscriber())
 
@@ -56,6 +86,9 @@ class TrialClient(WithoutDefaultEventHandlers, Node):
             if status.name == STATUS_NAME:
                 values = {kv.key: kv.value for kv in status.values}
                 with self._changed:
+                    self.supervisor_status = values
+                    self.reasons[values.get('bag', ''), values.get('state', '')] = \
+                        values.get('reason', '')
                     self.reason = values.get('reason', '')
                     self.supervisor_trials = int(values.get('trials') or 0)
                     self.supervisor_bag = values.get('bag', '')
@@ -114,7 +147,7 @@ class TrialClient(WithoutDefaultEventHandlers, Node):
     def _trial_ended_since(self, first_state: int):
         """The end of a trial heard at or after index ``first_state`` of self.states."""
         def ended() -> str | None:
-            final = self._first_heard(('done', 'aborted'), first_state)
+            final = self._first_heard(END_STATES, first_state)
             return None if final is None else f'the trial ended ({final})'
         return ended
 
@@ -136,11 +169,7 @@ class TrialClient(WithoutDefaultEventHandlers, Node):
         """Ask the supervisor to start a trial; (started, its message). `trial_start` is then
         the index in self.states from which wait_for_end() looks."""
         self.trial_start = len(self.states)
-        deadline = time.monotonic() + CLOSING_WAIT_S
         ok, message = self.call('start_trial')
-        while not ok and STILL_CLOSING in message and time.monotonic() < deadline:
-            time.sleep(CLOSING_RETRY_S)
-            ok, message = self.call('start_trial')
         if ok:
             self.wait_for_state(('configuring',), self.trial_start, timeout_s=10.0)
             with self._changed:
@@ -155,11 +184,24 @@ class TrialClient(WithoutDefaultEventHandlers, Node):
         deadline = time.monotonic() + timeout_s
         while True:
             remaining = deadline - time.monotonic()
-            final = self.wait_for_state(('done', 'aborted'), self.trial_start,
+            final = self.wait_for_state(END_STATES, self.trial_start,
                                         timeout_s=min(check_every_s, max(remaining, 0.0)))
             if final is not None or remaining <= 0:
                 return final
             alive()
+
+    def reason_of(self, bag, state: str, timeout_s: float = 5.0) -> str | None:
+        """The supervisor's reason for ``state`` in the trial logging to ``bag`` (its status
+        follows the state topic by a moment), None if not heard within ``timeout_s``."""
+        key = (str(bag), state)
+        deadline = time.monotonic() + timeout_s
+        with self._changed:
+            while key not in self.reasons:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return None
+                self._changed.wait(remaining)
+            return self.reasons[key]
 
     def run_trial(self, timeout_s: float = 300.0) -> tuple[bool, str, str | None]:
         """Start a trial and wait for its end: (started, start message, final state)."""
@@ -167,3 +209,53 @@ class TrialClient(WithoutDefaultEventHandlers, Node):
         if not ok:
             return False, message, None
         return True, message, self.wait_for_end(timeout_s)
+
+    # ------------------------------------------------------------------ parameters
+    def set_parameters(self, values: dict, timeout_s: float = 10.0) -> tuple[bool, str]:
+        """Set the supervisor's parameters ``values`` (name -> value, typed as it declares
+        them: a float for a double, an int too), in order: (True, ''), or (False,
+        '<name>: <why>') for the first one refused, by the supervisor (the later ones are
+        set all the same) or here (an unknown name, a value of the wrong type: nothing is
+        sent). StackError if the supervisor does not answer within ``timeout_s``."""
+        parameters = []
+        for name, value in values.items():
+            try:
+                parameters.append(Parameter(name=name, value=parameter_value(name, value)))
+            except KeyError:
+                return False, f'{name}: not a parameter of the supervisor'
+            except ValueError as exc:
+                return False, f'{name}: {exc}'
+        response = self._ask(self._set_parameters, SetParameters.Request(parameters=parameters),
+                             timeout_s)
+        for parameter, result in zip(parameters, response.results):
+            if not result.successful:
+                return False, f'{parameter.name}: {result.reason}'
+        return True, ''
+
+    def get_parameters(self, names, timeout_s: float = 10.0) -> dict:
+        """The supervisor's parameters ``names`` (name -> value; None for one it does not
+        have). StackError if it does not answer within ``timeout_s``."""
+        names = list(names)
+        response = self._ask(self._get_parameters, GetParameters.Request(names=names), timeout_s)
+        return {name: parameter_value_to_python(value)
+                for name, value in zip(names, response.values)}
+
+    def _ask(self, client, request, timeout_s: float):
+        """The answer of an idempotent service call, asked again after ANSWER_GRACE_S without
+        one (a lost answer, see above); StackError after ``timeout_s``."""
+        name = self.resolve_service_name(client.srv_name)
+        deadline = time.monotonic() + timeout_s
+        if not client.wait_for_service(timeout_sec=timeout_s):
+            raise StackError(f'{name} is not available after {timeout_s} s')
+        while True:
+            future = client.call_async(request)
+            future.add_done_callback(lambda _: self._notify())
+            ask_again = min(time.monotonic() + ANSWER_GRACE_S, deadline)
+            with self._changed:
+                while not future.done() and time.monotonic() < ask_again:
+                    self._changed.wait(ask_again - time.monotonic())
+            if future.done():
+                return future.result()
+            client.remove_pending_request(future)
+            if time.monotonic() >= deadline:
+                raise StackError(f'{name} did not answer within {timeout_s} s')

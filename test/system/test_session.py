@@ -65,7 +65,7 @@ def run_trial(client):
     started, message, final = client.run_trial(timeout_s=TRIAL_TIMEOUT_S)
     assert started, message
     bag = Path(message.rsplit('logging to ', 1)[1])
-    wait_closed(bag)                # the final state is published before the log closes
+    wait_closed(bag)                # closed by then: the end is published once it is
     return final, summarize(bag).outcome['reason'], bag
 
 

@@ -248,7 +248,7 @@ def test_a_full_disk_mid_pull_stops_the_stage_and_keeps_what_was_written(tmp_pat
         monkeypatch.setattr(writer_module._AppendOnlyFile, 'write', disk_full)
         final = client.wait_for_end(60.0)
         sequence = stack.node(SUPERVISOR_NODE).sequence
-        assert sequence.finished.wait(30.0)     # 'aborted' is published before the log closes
+        assert sequence.finished.wait(30.0)     # the trial's thread ends after 'aborted'
         reason = sequence.outcome['reason']
         world = stack.node(SIM_WORLD_NODE).world
         deadline = time.monotonic() + 10.0
