@@ -1,0 +1,103 @@
+"""`mantis study`: run a plan of trials on a rig, each judged against the twin as it lands;
+`mantis study attach` fills the rows' tip speed and energy from tracker exports; `mantis study
+report` writes the effects and figures (docs/study.md)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import RIG_FAULT, USAGE_ERROR, InputError
+from .trial import PROCESSES
+
+USAGE = """mantis study PLAN --out DIR [options]     run (or resume) a study on a rig
+       mantis study attach DIR EXPORTS...      fill rows from the tracked videos' exports
+       mantis study report DIR                 effects, repeats still needed, figures"""
+EXIT_STATUSES = (
+    f'exit status: 0 every planned trial is recorded; {USAGE_ERROR} bad input (the plan, '
+    f'an export, a study directory of another plan); {RIG_FAULT} a rig fault (named in one '
+    f'line, the stage stopped first; run the same command again to resume); 130 / 143 '
+    f'interrupted by SIGINT / SIGTERM (the trial in progress is recorded as interrupted and '
+    f'run again on resume)')
+
+
+def add_commands(commands) -> None:
+    study = commands.add_parser(
+        'study', usage=USAGE, help='run a plan of trials, each judged against the twin\'s '
+        'forecast; resumable (attach, report: see --help)', epilog=EXIT_STATUSES,
+        description=__doc__)
+    study.add_argument('plan', metavar='PLAN|attach|report',
+                       help='the plan (YAML, docs/study.md), or attach / report')
+    study.add_argument('rest', nargs='*', metavar='DIR EXPORTS',
+                       help='attach: the study directory and the exports; report: the '
+                            'study directory')
+    study.add_argument('--out', type=Path, help='the study\'s directory (its record study.csv, '
+                       'the plan as run, the bags under bags/, the report under report/)')
+    study.add_argument('--connect', action='store_true',
+                       help='run on a rig already up (`ros2 launch mantis_rig ...` or `mantis '
+                            'bringup`) in this ROS domain, instead of bringing one up')
+    study.add_argument('--backend', choices=('sim', 'hardware'), default='sim',
+                       help='the rig this command brings up (default sim); hardware asks the '
+                            'person before each trial')
+    study.add_argument('--processes', choices=PROCESSES, default='single',
+                       help='layout of the rig this command brings up (as `mantis trial`)')
+    study.add_argument('--real-time-factor', type=float, default=1.0,
+                       help='simulated seconds per wall second (sim; 0: as fast as it goes)')
+    study.add_argument('--seed', type=int, default=0,
+                       help='seed of the simulated session (sim): sensor noise and the robots')
+    study.add_argument('--namespace', default='', metavar='/NS',
+                       help='the rig\'s ROS namespace (as `mantis trial`)')
+    study.add_argument('--set', dest='overrides', action='append', default=[],
+                       metavar='KEY=VALUE', help='a supervisor or scene parameter for the rig '
+                       'this command brings up (as `mantis trial`); repeatable')
+    study.add_argument('--log-dir', type=Path, help='with --processes multi: node output here')
+    study.add_argument('--ask', action='store_true',
+                       help='ask the person before each trial also in simulation')
+    study.set_defaults(run=run_study, live=None, pull_speed=None)
+
+
+def run_study(args) -> int:
+    if args.plan == 'attach':
+        return _attach(args)
+    if args.plan == 'report':
+        return _report(args)
+    if args.rest:
+        raise InputError(f'mantis study PLAN takes one plan; got also {" ".join(args.rest)} '
+                         f'(attach and report are `mantis study attach|report DIR`)')
+    if args.out is None:
+        raise InputError('mantis study PLAN needs --out DIR (the study\'s directory)')
+    from mantis_sim.studies.rig_study.plan import load_plan
+
+    from ..trial.conditions import check_value
+    plan = load_plan(args.plan, check_condition=check_value)
+    if args.connect:
+        from ..study.session import run_connected
+        return run_connected(plan, args)
+    from ..study.session import run_with_stack
+    return run_with_stack(plan, args)
+
+
+def _directory(args) -> Path:
+    if len(args.rest) < 1:
+        raise InputError(f'mantis study {args.plan} needs the study directory')
+    return Path(args.rest[0])
+
+
+def _attach(args) -> int:
+    from ..study.attach import attach_exports
+    directory = _directory(args)
+    exports = [Path(p) for p in args.rest[1:]]
+    if not exports:
+        raise InputError('mantis study attach DIR EXPORTS...: no export given')
+    filled = attach_exports(directory, exports, say=print)
+    print(f'{filled} row(s) filled from {len(exports)} export(s); {directory / "study.csv"}')
+    return 0
+
+
+def _report(args) -> int:
+    from ..study.report import write_report
+    directory = _directory(args)
+    written = write_report(directory, say=print)
+    print(f'report: {written}')
+    return 0
+
+
+__all__ = ['add_commands']

@@ -1,0 +1,61 @@
+"""The study's analyst: one worker process, started fresh (spawn), that simulates the twin's
+forecast ensembles and measures each trial's bag while the rig runs the next trial. It runs
+at a lower priority than the rig's processes, with one BLAS thread: a trial in progress keeps
+the machine first. Results come back in the order the work was asked for."""
+from __future__ import annotations
+
+from concurrent.futures import Future, ProcessPoolExecutor
+import multiprocessing
+import os
+from pathlib import Path
+import signal
+
+NICENESS = 10
+
+
+def _start_worker() -> None:
+    # The study's process stops the study on Ctrl-C; the terminal sends it to the worker too,
+    # which is ended by its pool, not by a traceback of its own.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        os.nice(NICENESS)
+    except OSError:
+        pass
+    from mantis_sim.blas import one_blas_thread
+    one_blas_thread()
+
+
+def _ensemble(scene_name: str, overrides: list, conditions: dict, robots: int, seed: int,
+              slack_force_N: float):
+    from mantis_sim.scene import load_scene
+    from mantis_sim.studies.rig_study.forecast import simulate_ensemble
+    scene = load_scene(scene_name, overrides)
+    return simulate_ensemble(scene, conditions, robots, seed, slack_force_N=slack_force_N)
+
+
+def _measure(bag: str) -> dict:
+    from mantis_rig.study.measure import measure_trial
+    try:
+        return measure_trial(Path(bag))
+    except Exception as exc:  # noqa: BLE001 - a bag that cannot be read is its row's note, not the study's end
+        return {'analysis_note': f'cannot measure {bag}: {type(exc).__name__}: {exc}'}
+
+
+class Analyst:
+    def __init__(self):
+        self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context('spawn'),
+                                         initializer=_start_worker)
+
+    def ensemble(self, scene_name: str, overrides: list, conditions: dict, robots: int,
+                 seed: int, slack_force_N: float) -> Future:
+        return self._pool.submit(_ensemble, scene_name, list(overrides), dict(conditions),
+                                 robots, seed, slack_force_N)
+
+    def measure(self, bag: Path) -> Future:
+        return self._pool.submit(_measure, str(bag))
+
+    def close(self, wait: bool = True) -> None:
+        self._pool.shutdown(wait=wait, cancel_futures=not wait)
+
+
+__all__ = ['Analyst']
