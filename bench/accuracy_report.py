@@ -12,7 +12,7 @@ import sys
 
 from machine import REPO, stamp
 
-from mantis_sim import benchmark
+from mantis_sim.studies.design import benchmark
 
 
 def main() -> int:

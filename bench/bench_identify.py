@@ -17,9 +17,9 @@ import time
 from machine import REPO, stamp
 
 from mantis_sim.scene import load_scene
-from mantis_sim.studies import identify as ident
-from mantis_sim.studies.parallel import ClusterMap
-from mantis_sim.studies.strikes import read_strikes
+from mantis_sim.studies.real_strikes import identify as ident
+from mantis_sim.studies.real_strikes.strikes import read_strikes
+from mantis_sim.studies.shared.parallel import ClusterMap
 
 GROUPS = ('air_19mm', 'air_23mm', 'water_23mm')
 

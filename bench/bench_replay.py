@@ -56,7 +56,7 @@ print(count[0])
 
 def bench_analysis(workdir: Path) -> None:
     from mantis_rig.analysis import analyze_tracks
-    from mantis_rig.analysis.bag_input import read_trial_bag
+    from mantis_rig.analysis.inputs.bag import read_trial_bag
     from mantis_rig.cli import main
 
     bag = workdir / 'real_trial'

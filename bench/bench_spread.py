@@ -27,13 +27,14 @@ from machine import REPO, stamp
 import numpy as np
 
 from mantis_sim import robots
-from mantis_sim.blas import one_blas_thread
 from mantis_sim.fast import warm_up
 from mantis_sim.scene import load_scene
 from mantis_sim.spread import DEFAULT_ROBOTS
-from mantis_sim.studies import forecast, spread_effects, spread_fit
-from mantis_sim.studies.parallel import ClusterMap
-from mantis_sim.studies.strikes import read_strikes
+from mantis_sim.studies.design import spread_effects
+from mantis_sim.studies.real_strikes import forecast, spread_fit
+from mantis_sim.studies.real_strikes.strikes import read_strikes
+from mantis_sim.studies.shared.blas import one_blas_thread
+from mantis_sim.studies.shared.parallel import ClusterMap
 
 GROUPS = ('air_19mm', 'air_23mm', 'water_23mm')
 ROBOT_COUNTS = (25, 50, 100, 200, 400, 800)

@@ -20,10 +20,10 @@ import time
 
 from machine import REPO, stamp, yardstick_s
 
-from mantis_sim.designs import latin_hypercube, parse_range, run_chunk
-from mantis_sim.studies.accuracy import choose_setting
-from mantis_sim.studies.parallel import ClusterMap
-from mantis_sim.studies.sweep import read_table, run_sweep
+from mantis_sim.studies.design.accuracy import choose_setting
+from mantis_sim.studies.design.designs import latin_hypercube, parse_range, run_chunk
+from mantis_sim.studies.design.sweep import read_table, run_sweep
+from mantis_sim.studies.shared.parallel import ClusterMap
 
 RANGES = ('geometry.d_t_mm=19:25', 'geometry.contact_angle_deg=1:8',
           'drive.pull_speed_mm_per_s=0.5:2.4')

@@ -1,10 +1,11 @@
-"""The two roots of what goes wrong in mantis_rig, and the exit statuses they end `mantis` with.
+"""The rig's own faults, and the exit statuses that end `mantis`.
 
-- :class:`InputError` (mantis_sim's, re-exported): bad input, named in the message: a file, a
-  field, a value or an option that cannot be used (ConditionError, BagError, TrackFormatError,
-  SceneError, ParameterError ...). `mantis` prints it in one line and exits
-  :data:`USAGE_ERROR`. It is not a ValueError: an ``except ValueError`` around a library call
-  does not swallow it.
+- Bad input (a file, a field, a value or an option that cannot be used: ConditionError,
+  BagError, TrackFormatError, SceneError, ParameterError ...) is an
+  :class:`mantis_sim.errors.InputError`, defined there once and imported from there by every
+  module of both packages (not from here: test/unit/test_layers.py). `mantis` prints it in one
+  line and exits :data:`USAGE_ERROR`. It is not a ValueError: an ``except ValueError`` around a
+  library call does not swallow it.
 - :class:`RigFault`: the rig or its node stack failed (a device refused, timed out or
   vanished, a node process died, the log could not be written). `mantis` prints it in one line
   and exits :data:`RIG_FAULT`; the stage has been stopped by then (the node or the command
@@ -13,7 +14,6 @@
 Anything else that reaches `mantis` is a bug and keeps its traceback. mantis_sim's own
 SimulationError (a run that cannot be integrated) exits 1.
 """
-from mantis_sim.errors import InputError
 
 USAGE_ERROR = 2      # bad input (an InputError) or a bad command line (argparse's own status)
 RIG_FAULT = 3        # a RigFault: a device or the node stack failed
@@ -43,5 +43,5 @@ class BagClosedError(RigFault):
     """The bag was written to after close()."""
 
 
-__all__ = ['BagClosedError', 'ConfigurationError', 'DeviceError', 'InputError', 'RIG_FAULT',
-           'RigFault', 'SafetyLimitError', 'StackError', 'USAGE_ERROR']
+__all__ = ['BagClosedError', 'ConfigurationError', 'DeviceError', 'RIG_FAULT', 'RigFault',
+           'SafetyLimitError', 'StackError', 'USAGE_ERROR']

@@ -4,8 +4,9 @@ InputError: a file, a field or a value that cannot be used, or a result it would
 physically impossible. Its message names which, and where (the file; the record, topic and log
 time; the row; the key). The `mantis` command line reports it in one line and exits 2; any
 other exception is a bug and keeps its traceback. It is not a ValueError, so that an
-``except ValueError`` around a library call never swallows it (the rig package's errors
-module re-exports it beside the root of the rig's faults).
+``except ValueError`` around a library call never swallows it. Every module of mantis_sim and
+of the packages built on it imports it from here, the one way in (the rig package's errors
+module holds the rig's faults, not this; test/unit/test_layers.py).
 """
 
 

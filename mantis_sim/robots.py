@@ -11,10 +11,9 @@ import numpy as np
 
 from .model import SimulationError
 from .parameters import ParameterError
-from .results import simulate
+from .results import lab_spring_energy_mJ, simulate
 from .scene import Scene
 from .spread import Spread, quantiles
-from .studies.strikes import lab_spring_energy_mJ
 
 
 def scene_spread(scene: Scene) -> Spread:

@@ -1,7 +1,8 @@
 """The robot's spread: how far strikes of one design scatter, and how sure the model is.
 
-A scene's `spread` section (written by `mantis identify --spread`, studies/spread_fit.py)
-describes what differs between simulated robots of one design, each part drawn on its own:
+A scene's `spread` section (written by `mantis identify --spread`,
+studies/real_strikes/spread_fit.py) describes what differs between simulated robots of one
+design, each part drawn on its own:
 
 - **the latent**: where the arm sits on the latch (`geometry.latch_offset_deg`), which the
   recorded conditions do not fix. A strike's value is the group's mean, plus its day's

@@ -8,9 +8,10 @@
   bag is one trial, never searched further. Hidden entries (``.name``) and Excel's lock files
   (``~$name.xlsx``) found in a directory are not trials. A path named on the command line is
   always a trial, whatever its name (if it cannot be read, its row says why).
-- :func:`analyse_one` analyses one trial as ``mantis analyze PATH`` does and returns its table
-  row; it never raises: a trial that cannot be read or analysed is a ``refused`` row whose
-  ``reason`` says why.
+- :func:`analyse_one` reads one trial (:func:`.inputs.read_trial`), analyses it as ``mantis
+  analyze PATH`` does (:func:`.trial.analyse_trial`) and returns its table row; it never
+  raises: a trial that cannot be read or analysed is a ``refused`` row whose ``reason`` says
+  why.
 - :func:`run_batch` analyses the trials over a process pool and returns the rows in the
   order of the trials; :func:`write_table` writes them as CSV (:data:`COLUMNS`).
 """
@@ -32,13 +33,9 @@ import numpy as np
 from mantis_sim.errors import InputError
 
 from ..recording import BagError
-from .bag_input import load_trial_input
-from .conditions import params_for_trial
-from .report import analyze_tracks
-from .tracking import TrackFormatError
+from .inputs import TrackFormatError, read_trial
+from .trial import TrialRefused, analyse_trial
 
-#: The strike counts as recorded once the tip speed has fallen below this share of its peak.
-STRIKE_END_SHARE = 0.5
 TRACKING_SUFFIXES = ('.xlsx', '.csv', '.csv.gz')
 PHASES = ('I', 'II', 'III', 'IV')
 #: The table's columns: what the trial was, whether it was analysed, and its summary numbers.
@@ -51,58 +48,6 @@ OK, REFUSED = 'ok', 'refused'
 _SUMMARY_COLUMNS = ('peak_tip_speed_mps', 'overcentering_s', 'peak_body_speed_radps',
                     'peak_arm_speed_radps', 'max_spring_energy_mJ', 'L1_mm',
                     'contact_angle_deg')
-
-
-def strike_recorded(analysis) -> bool:
-    """True if the tip speed falls below STRIKE_END_SHARE of its peak after the peak."""
-    i = analysis.phases.index_peak
-    tip = analysis.tip_speed_mps
-    return bool(i < len(tip) - 1 and tip[i + 1:].min() < STRIKE_END_SHARE * tip[i])
-
-
-class TrialRefused(InputError):
-    """A trial that was read but cannot be analysed; the message says why."""
-
-
-def trial_params(trial, given: dict | None = None) -> tuple:
-    """(AnalysisParams, where they came from) of a trial that was read: its conditions, and
-    ``given``, stated by the user; its recorded force, if any."""
-    try:
-        params, sources = params_for_trial(trial.conditions, given=given or {})
-    except InputError as exc:          # ConditionError (a condition out of range), SceneError
-        raise TrialRefused(str(exc)) from exc
-    if trial.force_N is not None:
-        params.tendon_force_N, params.tendon_force_time_s = trial.force_N, trial.force_time_s
-    return params, sources
-
-
-def analyse_trial(trial, given: dict | None = None) -> tuple:
-    """(analysis, warnings, where the parameters came from) of a trial that was read
-    (:class:`bag_input.TrialInput`), as ``mantis analyze`` analyses it: its conditions (and
-    ``given``, stated by the user) set the parameters, recorded force gives the tendon's work.
-    Raises :class:`TrialRefused` if it cannot be analysed, or if a damaged trial's data end
-    before the strike is over; an undamaged trial that ends too early is analysed with a
-    warning."""
-    tracks = trial.tracks
-    last = float(tracks.time_s[-1])
-    params, sources = trial_params(trial, given)
-    try:
-        analysis = analyze_tracks(tracks, params)
-    except (InputError, ValueError, IndexError) as exc:    # refused, or no fit on these data
-        raise TrialRefused(
-            f'not enough data before the damage: the data end at t = {last:.4f} s: {exc}'
-            if trial.truncated else f'analysis failed: {exc}') from exc
-    notes = []
-    if analysis.lost_frames_in_strike:
-        notes.append(f'tracking ends {analysis.lost_frames_in_strike} frame(s) into the strike '
-                     f'(markers lost from then on): its end is extrapolated')
-    if strike_recorded(analysis):
-        return analysis, notes, sources
-    why = (f'the data end at t = {last:.4f} s, before the strike is over (the tip speed '
-           f'never falls below {STRIKE_END_SHARE:.0%} of its peak after it)')
-    if trial.truncated:
-        raise TrialRefused(f'not enough data before the damage: {why}')
-    return analysis, notes + [f'{why}; phase times and peaks are not reliable'], sources
 
 
 # ------------------------------------------------------------------------------ the trials
@@ -199,7 +144,7 @@ def analyse_one(path, given: dict | None = None, frame_rate_hz: float | None = N
         trial, notes = None, []
         stage = 'reading'
         try:
-            trial = load_trial_input(path, frame_rate_hz, length_unit)
+            trial = read_trial(path, frame_rate_hz, length_unit)
             stage = 'analysis'
             row = _analyse(path, trial, given or {}, notes)
         except Exception as exc:  # noqa: BLE001 - the batch's boundary: a trial's failure, whatever it is, is its row (named), never the batch's end

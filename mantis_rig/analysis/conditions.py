@@ -17,7 +17,7 @@ import math
 from mantis_sim.errors import InputError
 
 from .energy import InertiaParams
-from .report import AnalysisParams
+from .pipeline import AnalysisParams
 
 #: Trial conditions a tracking file does not carry, given on the command line (the rig's
 #: bags carry them in ``trial_conditions``): trial condition -> option. Both given is what it

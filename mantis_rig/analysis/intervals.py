@@ -36,9 +36,9 @@ import numpy as np
 
 from mantis_sim.errors import InputError
 
+from .inputs import MarkerTracks
 from .kinematics import STRIKE_SPEED_SHARE, JointAngles, coordinate_resolution_mm
-from .report import AnalysisParams, TrialAnalysis, analyze_linkage, analyze_tracks
-from .tracking import MarkerTracks
+from .pipeline import AnalysisParams, TrialAnalysis, analyze_linkage, analyze_tracks
 
 LEVEL = 0.8
 #: The tracker's jitter in units of its step (mantis_sim.parameters.Camera: 0.03 px / 0.1 px).

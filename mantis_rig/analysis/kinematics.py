@@ -56,6 +56,7 @@ from .geometry import (
     signed_angle,
     template_point,
 )
+from .inputs import MarkerTracks
 from .smoothing import (
     angle_noise_rad,
     full_window,
@@ -63,7 +64,6 @@ from .smoothing import (
     local_poly_fit,
     smooth_angle,
 )
-from .tracking import MarkerTracks
 
 # The strike window ends when the body's angular speed has fallen below this share of its peak
 # for good (the rebound has died down). On the reference trial shares of 0.02 .. 0.5 move the

@@ -9,7 +9,7 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .report import TrialAnalysis  # noqa: E402
+from .pipeline import TrialAnalysis  # noqa: E402
 
 PHASE_COLOURS = {'I': '#4C72B0', 'II': '#55A868', 'III': '#C44E52', 'IV': '#8172B2'}
 

@@ -22,8 +22,8 @@ from mantis_sim.sensors import CameraSensor
 from mantis_sim.world import World
 
 from .conditions import params_for_trial
-from .report import analyze_tracks
-from .tracking import MarkerTracks
+from .inputs import MarkerTracks
+from .pipeline import analyze_tracks
 
 PHASES = ('II', 'III', 'IV')
 # The world advances in steps like the trial's world runner; the strike is found on them.

@@ -6,7 +6,8 @@ import math
 from pathlib import Path
 import sys
 
-from ..errors import InputError
+from mantis_sim.errors import InputError
+
 from .options import (
     add_condition_options,
     add_export_options,
@@ -114,8 +115,8 @@ def run_analyze(args) -> int:
 
 
 def _analyze_one(args) -> int:
-    from ..analysis.bag_input import is_bag_path, load_trial_input
-    from ..analysis.batch import TrialRefused, analyse_trial
+    from ..analysis.inputs import is_bag_path, read_trial
+    from ..analysis.trial import TrialRefused, analyse_trial
 
     given = given_conditions(args)
     bag = is_bag_path(args.path)
@@ -124,7 +125,7 @@ def _analyze_one(args) -> int:
         raise InputError(f'{args.path} is a bag: --frame-rate and --length-unit apply to '
                          'tracking files only (a bag states its own)')
     try:
-        trial = load_trial_input(args.path, **options)
+        trial = read_trial(args.path, **options)
     except OSError as exc:
         raise InputError(f'{args.path}: {exc}') from exc
     if trial.problems:

@@ -19,9 +19,9 @@ import yaml
 
 from mantis_sim.errors import InputError
 from mantis_sim.parameters import ParameterError
-from mantis_sim.studies import day_state as ds
-from mantis_sim.studies import identify as ident
-from mantis_sim.studies.parallel import ClusterMap
+from mantis_sim.studies.real_strikes import day_state as ds
+from mantis_sim.studies.real_strikes import identify as ident
+from mantis_sim.studies.shared.parallel import ClusterMap
 
 from .identify import _load_strikes, _log, _scenes, _strike_arguments
 from .options import check_out_folder, json_safe

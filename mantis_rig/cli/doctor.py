@@ -25,7 +25,6 @@ import math
 import os
 from pathlib import Path
 import shutil
-import sys
 import threading
 from typing import Optional
 
@@ -91,7 +90,7 @@ class Report:
 
 
 def add_commands(commands) -> None:
-    from ..hardware.backends import BACKENDS
+    from ..contract import BACKENDS
     doctor = commands.add_parser(
         'doctor', help='find the rig\'s devices and check them before a trial',
         description=__doc__.split('\n\n')[0])
@@ -213,7 +212,7 @@ def check_disk(report: Report, out: Path) -> None:
 # --- the devices ----------------------------------------------------------------------------
 
 class HardwareRig:
-    """The real devices, built from the parameters (none opened here)."""
+    """The real devices, built from the parameters by hardware.backends (none opened here)."""
 
     sim = False
 
@@ -221,21 +220,23 @@ class HardwareRig:
         self.options = options
         self.params = options.params
 
-    def make_stage(self, port: str):
-        from ..hardware.kdc101 import Z8_COUNTS_PER_MM, Kdc101Stage
-        return Kdc101Stage(port, self.params.counts_per_mm or Z8_COUNTS_PER_MM)
+    def make_stage(self, choice):
+        """choice: the port choose_stage_port chose (discovery.StageChoice)."""
+        from ..hardware.backends import make_stage
+        return make_stage('hardware', choice=choice, counts_per_mm=self.params.counts_per_mm)
 
     def make_daq(self):
-        from ..hardware.nidaq_force import NidaqForceDaq
-        return NidaqForceDaq(self.params.daq_config())
+        from ..hardware.backends import make_force_daq
+        return make_force_daq('hardware', config=self.params.daq_config())
 
     def make_trigger(self):
-        from ..hardware.nidaq_trigger import NidaqCameraTrigger
-        return NidaqCameraTrigger(self.params.trigger_output)
+        from ..hardware.backends import make_camera_trigger
+        return make_camera_trigger('hardware', output=self.params.trigger_output)
 
 
 class SimRig:
-    """The simulated rig's devices on a world of the params' scene, run in this process."""
+    """The simulated rig's devices, built by hardware.backends, on a world of the params'
+    scene run in this process."""
 
     sim = True
 
@@ -264,17 +265,18 @@ class SimRig:
         """The simulated tendon's true force now (the stage at rest)."""
         return float(self.port.tendon_force(self.port.now_s(), 1.0, 1, 10.0)[0])
 
-    def make_stage(self, port: str):
-        from ..hardware.sim_stage import SimStage
-        return SimStage(self.port)
+    def make_stage(self, choice=None):
+        from ..hardware.backends import make_stage
+        return make_stage('sim', self.port)
 
     def make_daq(self):
-        from ..hardware.sim_force import SimForceDaq
-        return SimForceDaq(self.port, self.scene, self.params.seed, self.params.daq_config())
+        from ..hardware.backends import make_force_daq
+        return make_force_daq('sim', self.port, scene=self.scene, seed=self.params.seed,
+                              config=self.params.daq_config())
 
     def make_trigger(self):
-        from ..hardware.sim_camera import SimCameraTrigger
-        return SimCameraTrigger(self.port, self.scene)
+        from ..hardware.backends import make_camera_trigger
+        return make_camera_trigger('sim', self.port, scene=self.scene)
 
 
 def check_devices(report: Report, options: Options, rig) -> None:
@@ -516,7 +518,8 @@ def _port_fix(message: str, port: str) -> str:
             'it still does not answer')
 
 
-def choose_stage_port(report: Report, params) -> Optional[str]:
+def choose_stage_port(report: Report, params):
+    """The stage's port (a discovery.StageChoice), reported; None when there is none."""
     from ..hardware.discovery import DiscoveryError, choose_kdc101, describe_found, list_kdc101
     name = 'stage: port'
     try:
@@ -528,7 +531,7 @@ def choose_stage_port(report: Report, params) -> Optional[str]:
         return None
     if params.stage_serial_number:
         report.add(name, OK, f'chose {choice.reason}')
-        return choice.port
+        return choice
     found = list_kdc101()
     listed = describe_found(found)
     if not found:
@@ -541,16 +544,20 @@ def choose_stage_port(report: Report, params) -> Optional[str]:
                    f'{found[0].serial_number} (or serial_port to {found[0].port})')
     else:
         report.add(name, OK, f'serial_port {choice.port} (parameter); {listed}')
-    return choice.port
+    return choice
 
 
 def check_stage(report: Report, options: Options, rig, loadcell_ok: bool) -> None:
     from ..hardware.interfaces import DeviceError
     params = options.params
-    port = 'simulated' if rig.sim else choose_stage_port(report, params)
-    if port is None:
-        return
-    stage = rig.make_stage(port)
+    if rig.sim:
+        choice, port = None, 'simulated'
+    else:
+        choice = choose_stage_port(report, params)
+        if choice is None:
+            return
+        port = choice.port
+    stage = rig.make_stage(choice)
     try:
         try:
             stage.open()
@@ -802,14 +809,6 @@ def _motion_fix(feed_error, message: str, stage) -> str:
     return ('check the stage and its cable, that nothing blocks it, and the limit switches; '
             'then run mantis doctor --move again')
 
-
-def main(argv=None) -> int:   # `python -m mantis_rig.cli.doctor`
-    from .main import main as mantis
-    return mantis(['doctor', *(sys.argv[1:] if argv is None else argv)])
-
-
-if __name__ == '__main__':
-    sys.exit(main())
 
 __all__ = ['Check', 'FAIL', 'OK', 'Options', 'Report', 'WARN', 'add_commands', 'run',
            'run_checks']

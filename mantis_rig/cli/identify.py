@@ -18,17 +18,17 @@ import yaml
 
 from mantis_sim.errors import InputError
 from mantis_sim.scene import available_scenes, load_scene
-from mantis_sim.studies import fidelity, forecast, spread_fit
-from mantis_sim.studies import identify as ident
-from mantis_sim.studies.csv_table import write_rows
-from mantis_sim.studies.parallel import ClusterMap
-from mantis_sim.studies.strikes import (
+from mantis_sim.studies.real_strikes import fidelity, forecast, spread_fit
+from mantis_sim.studies.real_strikes import identify as ident
+from mantis_sim.studies.real_strikes.strikes import (
     RECORD_WINDOW_S,
     RealStrike,
     StrikeDataError,
     StrikeSeries,
     read_strikes,
 )
+from mantis_sim.studies.shared.csv_table import write_rows
+from mantis_sim.studies.shared.parallel import ClusterMap
 
 from .options import add_cluster_options, check_out_folder, check_spread_request, json_safe
 
@@ -74,7 +74,8 @@ def add_commands(commands) -> None:
     ident_cmd.add_argument('--weight', action='append', default=[], metavar='NAME=VALUE',
                            help='weight of a kind of residual: tip_speed, spring_energy, '
                                 'body_speed, arm_speed (relative errors), series (the recorded '
-                                'motion); defaults in mantis_sim/studies/identify.py, Weights')
+                                'motion); defaults in mantis_sim/studies/real_strikes/identify.py, '
+                                'Weights')
     ident_cmd.add_argument('--loss', default='linear', metavar='linear|NAME:SCALE',
                            help='how residuals count: linear (least squares, the default) or '
                                 'a robust loss, soft_l1, huber or cauchy, whose residuals '
@@ -338,7 +339,7 @@ def _per_day_starts(scenes, strikes, params, per_day, weights, mapper, at_seat=F
     the days' states rather than at the scene's value for all of them."""
     if not per_day:
         return None
-    from mantis_sim.studies import day_state as ds
+    from mantis_sim.studies.real_strikes import day_state as ds
     own = {}
     for param in per_day:
         _log(f'identify: each day\'s {param.label} from its strikes, to start from')
@@ -421,7 +422,7 @@ def run_compare(args) -> int:
         simulated = model.simulate([[]])[0]
         forecasts = (forecast.forecast_strikes(scenes, strikes, args.spread, args.seed, mapper)
                      if args.spread else None)
-    from mantis_sim.studies import compare_plots
+    from mantis_sim.studies.real_strikes import compare_plots
     args.out.mkdir(parents=True, exist_ok=True)
     rows = fidelity.error_rows(strikes, simulated)
     write_rows(args.out / 'errors.csv', rows)

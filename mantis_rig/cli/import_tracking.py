@@ -1,7 +1,8 @@
 """`mantis import-tracking`: tracked video (CSV / .xlsx) -> trial bag."""
 from __future__ import annotations
 
-from ..errors import InputError
+from mantis_sim.errors import InputError
+
 from .options import (
     add_condition_options,
     add_export_options,
@@ -12,10 +13,9 @@ from .options import (
 
 
 def run_import(args) -> int:
-    from ..analysis import load_tracks
-    from ..analysis.bag_input import TrialInput
-    from ..analysis.batch import TrialRefused, analyse_trial
-    from ..analysis.tracking_import import write_tracking_bag
+    from ..analysis.inputs import TrialInput, load_tracks
+    from ..analysis.inputs.bag_writer import write_tracking_bag
+    from ..analysis.trial import TrialRefused, analyse_trial
 
     given = given_conditions(args)
     try:

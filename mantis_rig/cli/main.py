@@ -4,9 +4,10 @@ from __future__ import annotations
 import argparse
 import sys
 
+from mantis_sim.errors import InputError
 from mantis_sim.model import SimulationError
 
-from ..errors import RIG_FAULT, USAGE_ERROR, InputError, RigFault
+from ..errors import RIG_FAULT, USAGE_ERROR, RigFault
 from . import (
     analyze,
     control,

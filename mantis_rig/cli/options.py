@@ -6,7 +6,7 @@ import argparse
 import math
 import sys
 
-from ..errors import InputError
+from mantis_sim.errors import InputError
 
 
 def err(command, text):
@@ -82,7 +82,8 @@ def positive_int(text):
     return value
 
 
-#: analysis.tracker_export.LENGTH_UNITS, written out: building the parser imports no analysis.
+#: analysis.inputs.tracker_export.LENGTH_UNITS, written out: building the parser imports no
+#: analysis.
 LENGTH_UNITS = ('mm', 'um', 'px')
 
 

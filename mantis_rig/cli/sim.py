@@ -10,7 +10,7 @@ from mantis_sim.parameters import SECTIONS, describe
 from mantis_sim.results import WARNINGS, simulate
 from mantis_sim.scene import EFFECTS, available_scenes, load_scene
 from mantis_sim.spread import DEFAULT_ROBOTS
-from mantis_sim.studies import strike_report
+from mantis_sim.studies.design import strike_report
 
 from ..contract import FORCE_CEILING
 from .options import check_spread_request, json_safe
@@ -102,7 +102,7 @@ def run_sim(args) -> int:
 
 def _run_spread(args, scene) -> int:
     from mantis_sim import robots
-    from mantis_sim.studies.parallel import ClusterMap
+    from mantis_sim.studies.shared.parallel import ClusterMap
     check_spread_request(args.spread, {scene.name: scene})
     if args.out or args.plot:
         raise InputError('--spread prints quantiles: --out and --plot are for one simulation')
@@ -154,7 +154,7 @@ def run_scenes(args) -> int:
 
 
 def run_bench(args) -> int:
-    from mantis_sim import benchmark
+    from mantis_sim.studies.design import benchmark
     scenes = args.scene or ['reference_air_23mm', 'reference_water_23mm']
     tables = {}
     for name in scenes:

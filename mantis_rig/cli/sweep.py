@@ -56,10 +56,10 @@ def add_commands(commands) -> None:
 
 
 def run_sweep_command(args) -> int:
-    from mantis_sim.designs import check_ranges, grid, latin_hypercube, parse_range
     from mantis_sim.scene import load_scene
-    from mantis_sim.studies.accuracy import choose_setting
-    from mantis_sim.studies.sweep import SweepError, run_sweep
+    from mantis_sim.studies.design.accuracy import choose_setting
+    from mantis_sim.studies.design.designs import check_ranges, grid, latin_hypercube, parse_range
+    from mantis_sim.studies.design.sweep import SweepError, run_sweep
 
     if args.out.suffix != '.parquet':
         raise SweepError(f'--out {args.out}: the table is Parquet: name a .parquet file')
@@ -104,11 +104,11 @@ def run_sweep_command(args) -> int:
 
 
 def run_sweep_plot(args) -> int:
-    from mantis_sim.studies.plots import plot_sweep
-    from mantis_sim.studies.sweep import read_table
+    from mantis_sim.studies.design.plots import plot_sweep
+    from mantis_sim.studies.design.sweep import read_table
 
     if not args.table.exists():
-        from mantis_sim.studies.sweep import SweepError
+        from mantis_sim.studies.design.sweep import SweepError
         raise SweepError(f'{args.table}: no such file')
     rows = read_table(args.table)
     written = plot_sweep(rows, args.out, metric=args.metric, force_limit_n=args.force_limit,

@@ -5,16 +5,19 @@ and, for the sensors, the scene (a mantis_sim Scene or a scene name). The
 hardware drivers are imported only when asked for, so the simulated rig runs without pyserial
 or nidaqmx; the simulated ones (scipy: ~2 s) at import, so that a node pays for them when it
 starts rather than inside its configure transition. Devices come back unopened.
+
+The backends' names (BACKENDS) and their check (`check_backend`) live in mantis_rig.contract,
+the layer below, which imports nothing of this module.
 """
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
-from mantis_rig.contract import (  # the parameters' defaults
-    BACKENDS,
+from mantis_rig.contract import (  # the backends' check and the parameters' defaults
     DEFAULT_SERIAL_PORT,
     DEFAULT_TRIGGER_OUTPUT,
+    check_backend,
 )
 from mantis_sim.scene import Scene, load_scene
 
@@ -32,24 +35,22 @@ from .sim_force import SimForceDaq
 from .sim_stage import SimStage
 from .world_port import WorldPort
 
-
-def check_backend(backend: str) -> str:
-    if backend not in BACKENDS:
-        raise ConfigurationError(f'unknown backend {backend!r}; valid backends: '
-                                 f'{", ".join(BACKENDS)}')
-    return backend
+if TYPE_CHECKING:
+    from .discovery import StageChoice
 
 
 def make_stage(backend: str, port: Optional[WorldPort] = None, *,
                serial_port: str = DEFAULT_SERIAL_PORT, stage_serial_number: str = '',
-               counts_per_mm: Optional[float] = None,
+               choice: Optional[StageChoice] = None, counts_per_mm: Optional[float] = None,
                limits: Optional[StageLimits] = None, force_ceiling_n: Optional[float] = None,
                max_force_age_s: Optional[float] = 0.5,
                clock_s: Optional[Callable[[], float]] = None) -> Stage:
     """On hardware, `stage_serial_number` (a KDC101's serial number, or 'auto' for the only
     KDC101 on the machine) finds the port instead of `serial_port`
     (discovery.choose_kdc101: DiscoveryError, naming what was found, unless exactly one
-    controller matches); the stage's `choice` attribute says which port and why.
+    controller matches); the stage's `choice` attribute says which port and why. A `choice`
+    already made (discovery.choose_kdc101: `mantis doctor` reports it before it builds the
+    stage) is taken as it is, in place of both.
     With `force_ceiling_n`, the stage comes wrapped in a StageGuard: the caller must then
     feed it every force reading (StageGuard.observe_force), or pulls are refused and stopped
     once the readings are older than `max_force_age_s` on `clock_s` (default: monotonic wall
@@ -59,7 +60,8 @@ def make_stage(backend: str, port: Optional[WorldPort] = None, *,
     else:
         from .discovery import choose_kdc101
         from .kdc101 import Z8_COUNTS_PER_MM, Kdc101Stage
-        choice = choose_kdc101(serial_port, stage_serial_number)
+        if choice is None:
+            choice = choose_kdc101(serial_port, stage_serial_number)
         stage = Kdc101Stage(choice.port, counts_per_mm or Z8_COUNTS_PER_MM, limits=limits)
         stage.choice = choice
     if force_ceiling_n is None:

@@ -7,7 +7,7 @@ from conftest import data_file
 import pytest
 
 from mantis_rig.analysis import load_tracks
-from mantis_rig.analysis.report import analyze_tracks
+from mantis_rig.analysis.pipeline import analyze_tracks
 from mantis_rig.cli import main as mantis
 
 DATA = 'air_23mm_2p3mmps_trial1_markers.csv.gz'

@@ -21,8 +21,8 @@ from openpyxl import load_workbook
 import pytest
 
 from mantis_rig.analysis import AnalysisParams, analyze_tracks, load_tracks
-from mantis_rig.analysis.report import ImplausibleResult, check_plausible
-from mantis_rig.analysis.tracking import MarkerTracks
+from mantis_rig.analysis.inputs import MarkerTracks
+from mantis_rig.analysis.pipeline import ImplausibleResult, check_plausible
 
 pytestmark = pytest.mark.slow
 

@@ -171,7 +171,7 @@ def arm_lost(tracks, first, last):
 @pytest.mark.parametrize('around', [(-3, 3), (-10, 10), (-40, -20)],
                          ids=['at the peak', 'over the peak', 'before the peak'])
 def test_markers_lost_inside_the_strike_are_refused_not_guessed(analysis, around):
-    from mantis_rig.analysis.report import StrikeLost
+    from mantis_rig.analysis.pipeline import StrikeLost
     tracks = load_tracks(DATA)
     peak = int(np.searchsorted(tracks.time_s, analysis.phases.peak_tip_speed_s))
     with pytest.raises(StrikeLost, match='the markers were lost inside the strike'):

@@ -15,7 +15,9 @@ from conftest import data_file
 import numpy as np
 import pytest
 
-from mantis_rig.analysis import batch, tracker_export
+from mantis_rig.analysis import batch
+from mantis_rig.analysis import trial as one_trial
+from mantis_rig.analysis.inputs import tracker_export
 from mantis_rig.cli import main
 from mantis_rig.cli import options as cli_options
 
@@ -119,7 +121,7 @@ def test_batch_refuses_what_analysis_refuses_and_what_crashes(tmp_path, monkeypa
 
     def explode(*_):
         raise KeyError('boom')
-    monkeypatch.setattr(batch, 'analyze_tracks', explode)
+    monkeypatch.setattr(one_trial, 'analyze_tracks', explode)
     row = batch.analyse_one(PAIR_CSV)
     assert row['status'] == 'refused'
     assert row['reason'] == "unexpected KeyError in analysis: 'boom'"

@@ -1,9 +1,10 @@
-"""mantis_sim.blas: one BLAS thread for every BLAS library a simulating process uses."""
+"""mantis_sim.studies.shared.blas: one BLAS thread for every BLAS library a simulating process
+uses."""
 import subprocess
 import sys
 
 CHECK = '''
-from mantis_sim.blas import one_blas_thread
+from mantis_sim.studies.shared.blas import one_blas_thread
 one_blas_thread()
 import scipy.linalg  # as an implicit solver's first strike does, after the limit
 from threadpoolctl import threadpool_info

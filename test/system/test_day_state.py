@@ -10,10 +10,10 @@ from mantis_rig.cli import main as mantis
 from mantis_sim.model import kinetic_lever
 from mantis_sim.parameters import ParameterError
 from mantis_sim.scene import load_scene, load_scene_file
-from mantis_sim.studies import day_state as ds
-from mantis_sim.studies import fidelity
-from mantis_sim.studies import identify as ident
-from mantis_sim.studies.strikes import RealStrike
+from mantis_sim.studies.real_strikes import day_state as ds
+from mantis_sim.studies.real_strikes import fidelity
+from mantis_sim.studies.real_strikes import identify as ident
+from mantis_sim.studies.real_strikes.strikes import RealStrike
 
 TABLE = 'real_trials/authors_summary_train.csv'
 PROCESSED = 'real_trials/authors_processed'
@@ -179,7 +179,7 @@ def test_keys_that_constrain_each_other_are_varied_and_set_together():
     """A sweep of contact angle 5-8 with latch offset -4-0 holds only valid designs (1-8
     degrees): its ranges are accepted and each design runs, whichever key comes first; ranges
     with no valid design at all are refused before any work."""
-    from mantis_sim import designs
+    from mantis_sim.studies.design import designs
     scene = load_scene('air_23mm')
     ranges = [designs.parse_range('geometry.latch_offset_deg=-4:0:2'),
               designs.parse_range('geometry.contact_angle_deg=5:8:2')]

@@ -27,9 +27,9 @@ import numpy as np
 import pytest
 import yaml
 
-from mantis_rig.analysis.bag_input import load_trial_input, read_trial_bag
-from mantis_rig.analysis.batch import analyse_trial
-from mantis_rig.analysis.tracking import TrackFormatError
+from mantis_rig.analysis.inputs import TrackFormatError, read_trial
+from mantis_rig.analysis.inputs.bag import read_trial_bag
+from mantis_rig.analysis.trial import analyse_trial
 from mantis_rig.recording import BagError, BagReader, BagWriter, TruncatedBagWarning
 from mantis_rig.replay.synthetic import TOPICS, synthetic_messages
 from mantis_sim.errors import InputError
@@ -390,7 +390,7 @@ def analysed_plausibly_or_refused(path: Path) -> str:
     InputError naming it); what is accepted must be physically possible, checked here on its
     own rather than trusting the analysis' own check. Returns 'analysed' or 'refused'."""
     try:
-        trial = load_trial_input(path)
+        trial = read_trial(path)
         analysis, _, _ = analyse_trial(trial, {'d_t_mm': 23.0})
     except InputError:
         return 'refused'
@@ -463,7 +463,7 @@ def strike_bag(tmp_path_factory, tracking_lines):
     """The real export's frames around the strike, imported as `mantis import-tracking` does
     and rewritten uncompressed in 4 kB chunks, so that records can be changed in place."""
     from mantis_rig.analysis import load_tracks
-    from mantis_rig.analysis.tracking_import import write_tracking_bag
+    from mantis_rig.analysis.inputs.bag_writer import write_tracking_bag
     work = tmp_path_factory.mktemp('fuzz_strike')
     csv = write_tracking(tmp_path_factory, tracking_lines)
     write_tracking_bag(load_tracks(csv), work / 'imported', conditions={'d_t_mm': 23.0})
@@ -486,7 +486,7 @@ def bag_analysed_plausibly_or_refused(bag: Path) -> str:
 
 
 def test_the_strike_bag_itself_is_analysed(strike_bag):
-    trial = load_trial_input(strike_bag)
+    trial = read_trial(strike_bag)
     analysis, _, _ = analyse_trial(trial, {})
     assert 20.0 < analysis.summary()['peak_tip_speed_mps'] < 30.0
 

@@ -15,16 +15,15 @@ import pytest
 import yaml
 
 from mantis_rig.cli import main as mantis
+from mantis_sim.results import LAB_THETA1_REST_RAD, lab_spring_energy_mJ
 from mantis_sim.scene import load_scene, load_scene_file
-from mantis_sim.studies import fidelity
-from mantis_sim.studies import identify as ident
-from mantis_sim.studies.day_state import DayStateFit
-from mantis_sim.studies.strikes import (
-    LAB_THETA1_REST_RAD,
+from mantis_sim.studies.real_strikes import fidelity
+from mantis_sim.studies.real_strikes import identify as ident
+from mantis_sim.studies.real_strikes.day_state import DayStateFit
+from mantis_sim.studies.real_strikes.strikes import (
     SEAT_MIN_INTO_RECORD_S,
     RealStrike,
     StrikeDataError,
-    lab_spring_energy_mJ,
     phase_iv_times,
     read_processed_record,
     read_strikes,

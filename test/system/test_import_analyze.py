@@ -12,8 +12,8 @@ from openpyxl import load_workbook
 import pytest
 
 from mantis_rig.analysis import TrackFormatError, analyze_tracks, load_tracks
-from mantis_rig.analysis.bag_input import read_trial_bag
-from mantis_rig.analysis.tracking_import import ANGLES_TOPIC
+from mantis_rig.analysis.inputs.bag import read_trial_bag
+from mantis_rig.analysis.inputs.bag_writer import ANGLES_TOPIC
 from mantis_rig.cli import main
 from mantis_rig.contract import FORCE_BLOCK, MARKERS, resolve
 from mantis_rig.recording import BagReader, BagWriter
@@ -278,7 +278,7 @@ def test_analyze_bad_paths(tmp_path, capsys):
 def test_frames_without_the_strike_are_refused_with_the_reason():
     """A camera window that missed the strike (only loading in the frames): a clear error,
     not an index error."""
-    from mantis_rig.analysis.tracking import MarkerTracks
+    from mantis_rig.analysis.inputs import MarkerTracks
     tracks = load_tracks(DATA)
     keep = (tracks.time_s > 1.5) & (tracks.time_s < 2.55)          # phase IV starts at 2.6177
     loading = MarkerTracks(time_s=tracks.time_s[keep], frames=tracks.frames[keep],

@@ -138,7 +138,7 @@ def test_sweep_gives_each_design_its_quantiles_and_the_plot_weighs_effects_again
             'drive.pull_speed_mm_per_s=0.5:2.5:2', '--spread', '10', '--out', str(out),
             '--workers', '0', '--quiet']
     assert mantis(args) == 0
-    from mantis_sim.studies.sweep import read_table
+    from mantis_sim.studies.design.sweep import read_table
     rows = read_table(out)
     assert len(rows) == 6 and all(r['spread_robots'] == 10 for r in rows)
     for row in rows:

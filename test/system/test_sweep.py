@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from mantis_rig.cli import main as cli_main
-from mantis_sim.designs import grid, parse_range
-from mantis_sim.studies.plots import pareto_front
-from mantis_sim.studies.sweep import read_table, run_sweep
+from mantis_sim.studies.design.designs import grid, parse_range
+from mantis_sim.studies.design.plots import pareto_front
+from mantis_sim.studies.design.sweep import read_table, run_sweep
 
 SCENE = 'reference_air_23mm'
 FIXED = ['integration.solver=LSODA', 'integration.rtol=0.001']
@@ -102,7 +102,7 @@ def test_a_scheduler_and_two_workers_give_the_serial_table(serial_table, dask_cl
 
 def test_a_worker_killed_in_mid_sweep_loses_no_design(dask_cluster, tmp_path, monkeypatch):
     """Slow designs one per task; once some are back, one worker is killed outright."""
-    from mantis_sim.studies import sweep
+    from mantis_sim.studies.design import sweep
     address, workers = dask_cluster
     slow = ['integration.solver=Radau', 'integration.rtol=1e-7']
     many = grid([parse_range('geometry.d_t_mm=19:25:12'),
@@ -187,7 +187,7 @@ def test_accuracy_picks_the_cheapest_setting_that_reaches_it(tmp_path, capsys):
 
 
 def test_sweep_plot_writes_the_figures_and_the_best_designs(serial_table, tmp_path):
-    from mantis_sim.studies.sweep import write_table
+    from mantis_sim.studies.design.sweep import write_table
     table = tmp_path / 'study.parquet'
     write_table(serial_table, table)
     code = cli_main(['sweep-plot', str(table), '--out', str(tmp_path / 'figs'),

@@ -2,9 +2,10 @@
 
 Each variant is built here from synthetic marker motion (openpyxl for .xlsx, CSV text with the
 lab's quirks), read back with load_tracks and compared with what was written; seeded damaged
-copies of a real export are read or refused. That every real export loads as it states itself
-is checked with the analysis of the real trials (test_analysis_real_trials.py), which reads
-each file once.
+copies of a real export are read or refused. Every shared .xlsx export reads into the tracks
+that openpyxl's reading of it gives (the reference: the reader under test is python-calamine).
+That every real export loads as it states itself is checked with the analysis of the real
+trials (test_analysis_real_trials.py), which reads each file once.
 """
 import csv
 import io
@@ -13,11 +14,11 @@ import zipfile
 
 from conftest import data_file
 import numpy as np
-from openpyxl import Workbook
+from openpyxl import Workbook, load_workbook
 import pytest
 
 from mantis_rig.analysis import TrackFormatError, load_tracks
-from mantis_rig.analysis import tracker_export as te
+from mantis_rig.analysis.inputs import tracker_export as te
 
 N = 240                      # frames of every generated export
 RATE = 19000
@@ -313,6 +314,44 @@ def test_damaged_xlsx_is_refused_not_a_crash(tmp_path, kind):
     path.write_bytes(_damaged(tmp_path)[kind])
     with pytest.raises(TrackFormatError, match=re.escape(path.name)):
         load_tracks(path)
+
+
+# ------------------------------------------------- the shared exports against openpyxl
+SHARED_XLSX = ['air_23mm_2p3mmps_trial1_tracker_export.xlsx', 'real_trials/air_19mm_11kfps.xlsx',
+               'real_trials/air_19mm_6kfps.xlsx', 'real_trials/air_23mm_19kfps_4markers.xlsx',
+               'real_trials/air_23mm_19kfps_ma3.xlsx', 'real_trials/air_23mm_19kfps_pair.xlsx',
+               'real_trials/water_23mm_19kfps.xlsx']
+
+
+def openpyxl_rows(path) -> list[list]:
+    """The reference: the first worksheet's rows as openpyxl reads them (the reader before
+    python-calamine: read-only, cached values of formulas)."""
+    wb = load_workbook(path, read_only=True, data_only=True)
+    try:
+        return [list(r) for r in wb.worksheets[0].iter_rows(values_only=True)]
+    finally:
+        wb.close()
+
+
+def test_every_shared_xlsx_export_is_in_the_test():
+    found = {str(p.relative_to(data_file('.'))) for p in data_file('.').rglob('*.xlsx')}
+    assert found == set(SHARED_XLSX)
+
+
+@pytest.mark.parametrize('rel', SHARED_XLSX)
+def test_a_shared_export_reads_as_openpyxl_reads_it(rel):
+    """Identical tracks: every time, frame and coordinate (NaN where openpyxl's has NaN), the
+    camera frame, rate, unit and the header block's text in ``source``."""
+    path = data_file(rel)
+    tracks = load_tracks(path)
+    reference = te.read_export(openpyxl_rows(path), path, 'xlsx')
+    for field in ('time_s', 'frames'):
+        np.testing.assert_array_equal(getattr(tracks, field), getattr(reference, field))
+    assert tracks.markers_mm.keys() == reference.markers_mm.keys()
+    for name, xy in reference.markers_mm.items():
+        np.testing.assert_array_equal(tracks.markers_mm[name], xy, err_msg=name)
+    for field in ('handedness', 'tilt_deg', 'frame_rate_hz', 'length_unit', 'source'):
+        assert getattr(tracks, field) == getattr(reference, field), field
 
 
 # ------------------------------------------------------------------------ the CSV form

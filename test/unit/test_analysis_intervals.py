@@ -4,8 +4,8 @@ a time is widened by a frame; the re-tracking keeps the tracker's step and lost 
 import numpy as np
 import pytest
 
+from mantis_rig.analysis.inputs import MarkerTracks
 from mantis_rig.analysis.intervals import _basic_bootstrap, _interval, _tracked_again
-from mantis_rig.analysis.tracking import MarkerTracks
 from mantis_sim.errors import InputError
 
 

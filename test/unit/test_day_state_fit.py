@@ -5,10 +5,10 @@ import math
 import pytest
 
 from mantis_sim.scene import load_scene
-from mantis_sim.studies import day_state as ds
-from mantis_sim.studies import identify as ident
-from mantis_sim.studies.fidelity import SimulatedStrike
-from mantis_sim.studies.strikes import RealStrike
+from mantis_sim.studies.real_strikes import day_state as ds
+from mantis_sim.studies.real_strikes import identify as ident
+from mantis_sim.studies.real_strikes.fidelity import SimulatedStrike
+from mantis_sim.studies.real_strikes.strikes import RealStrike
 
 SCENE = load_scene('air_23mm')          # its hold: about 0.06 mm
 

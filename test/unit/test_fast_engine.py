@@ -194,3 +194,36 @@ def test_a_ctrl_c_inside_a_compiled_call_is_the_keyboard_interrupt():
         interruptible(nested)()
     with pytest.raises(SystemError, match='a bug'):
         interruptible(a_bug)()
+
+
+def _kernel_overloads() -> dict:
+    from mantis_sim.fast import radau
+    return {name: len(kernel.signatures) for name, kernel in (
+        ('integrate', radau.integrate), ('full_states', eq.full_states),
+        ('state_dynamics', eq.state_dynamics), ('observe_rows', eq.observe_rows))}
+
+
+@pytest.mark.parametrize('scene', ['air_23mm', 'reference_air_23mm'])     # compliant, rigid
+def test_the_engine_loads_every_kernel_a_strike_calls_without_simulating(scene):
+    """warm_up (and the first segments_for) loads each kernel with the argument types a strike
+    passes: a strike afterwards, rigid or compliant, dense or not, loads none."""
+    fast.warm_up()
+    loaded = _kernel_overloads()
+    assert all(n >= 1 for n in loaded.values()), loaded
+    for dense in (True, False):
+        result = simulate(load_scene(scene, ['integration.solver=fast']), dense=dense)
+        assert result.metrics['solver'] == 'fast' and result.metrics['strike_reached']
+    assert _kernel_overloads() == loaded
+
+
+def test_a_model_is_left_as_it_was_by_loading_the_engine():
+    sim = HybridSimulator(load_scene('air_23mm'))
+    before = (sim.model.l_free0, sim.model.theta1_guess, sim.model.rhs_evals)
+    loaded = fast._loaded
+    try:
+        fast._loaded = False                # load again, on this model
+        fast.load(sim.model)
+    finally:
+        fast._loaded = loaded or fast._loaded
+    after = (sim.model.l_free0, sim.model.theta1_guess, sim.model.rhs_evals)
+    assert math.isnan(before[0]) and math.isnan(after[0]) and before[1:] == after[1:]

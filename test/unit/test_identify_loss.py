@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from mantis_sim.studies.identify import IdentificationError, Loss
+from mantis_sim.studies.real_strikes.identify import IdentificationError, Loss
 
 
 @pytest.mark.parametrize('text, loss', [('linear', Loss()), ('cauchy:0.05', Loss('cauchy', 0.05)),

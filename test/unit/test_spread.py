@@ -12,10 +12,10 @@ import yaml
 from mantis_sim.parameters import ParameterError
 from mantis_sim.scene import load_scene, scene_from_dict
 from mantis_sim.spread import QUANTILE_LEVELS, Spread, crps, pit, quantiles
-from mantis_sim.studies import forecast, spread_fit
-from mantis_sim.studies.fidelity import SimulatedStrike
-from mantis_sim.studies.identify import IdentificationError
-from mantis_sim.studies.strikes import RealStrike
+from mantis_sim.studies.real_strikes import forecast, spread_fit
+from mantis_sim.studies.real_strikes.fidelity import SimulatedStrike
+from mantis_sim.studies.real_strikes.identify import IdentificationError
+from mantis_sim.studies.real_strikes.strikes import RealStrike
 
 GROUPS = ('air_19mm', 'air_23mm', 'water_23mm')
 

@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from mantis_sim.designs import ID_COLUMN, STATUS_OK
+from mantis_sim.studies.design.designs import ID_COLUMN, STATUS_OK
+from mantis_sim.studies.shared.csv_table import write_rows
 
-from .csv_table import write_rows
 from .sweep import SweepError
 
 SPEED, FORCE, ENERGY = 'peak_tip_speed_mps', 'peak_tendon_force_N', 'max_spring_energy_mJ'
@@ -86,7 +86,8 @@ def spread_effects(ok: list[dict], keys: list[str], metric: str) -> list[dict]:
     """For each varied key: the change of the metric's median over the key's range (least
     squares of q50 on all varied keys at once), one strike's scatter (the mean (q90 - q10) /
     2.563, as for a normal), and the strikes per design to see the change."""
-    from .fidelity import fit_slopes
+    from mantis_sim.studies.real_strikes.fidelity import fit_slopes
+
     from .spread_effects import strikes_needed
     medians = np.array([r[f'{metric}_q50'] for r in ok], float)
     slopes = fit_slopes([np.array([r[k] for r in ok], float) for k in keys], medians)

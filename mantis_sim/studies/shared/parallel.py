@@ -12,8 +12,8 @@ import socket
 import sys
 import time
 
-from mantis_sim.blas import one_blas_thread
 from mantis_sim.errors import InputError
+from mantis_sim.studies.shared.blas import one_blas_thread
 
 CONNECT_TIMEOUT_S = 10.0
 
@@ -154,7 +154,7 @@ class ClusterMap:
         results: list = [None] * len(items)
         try:
             if self.client is None:
-                one_blas_thread()                   # as on any worker (mantis_sim.blas)
+                one_blas_thread()                   # as on any worker (shared.blas)
                 for i, item in enumerate(items):
                     results[i] = function(item)
                     if bar:

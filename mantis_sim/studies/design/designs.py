@@ -10,7 +10,7 @@ simulation and its metrics), and a status:
 with the reason. With a spread (``spread_robots`` N > 0), the row also holds the quantiles
 q05..q95 of SPREAD_METRICS over N robots drawn from the scene's spread at the design
 (``peak_tip_speed_mps_q05``, ...), the same draws for every design of a seed (mantis_sim.robots).
-Nothing here knows where the designs run (mantis_sim.studies.sweep does).
+Nothing here knows where the designs run (mantis_sim.studies.design.sweep does).
 """
 from __future__ import annotations
 
@@ -24,14 +24,14 @@ import time
 
 import numpy as np
 
-from .blas import one_blas_thread
-from .errors import InputError
-from .model import SimulationError
-from .parameters import ParameterError
-from .results import JSON_KEYS, simulate
-from .robots import design_spread
-from .scene import Scene, load_scene
-from .spread import quantiles
+from mantis_sim.errors import InputError
+from mantis_sim.model import SimulationError
+from mantis_sim.parameters import ParameterError
+from mantis_sim.results import JSON_KEYS, simulate
+from mantis_sim.robots import design_spread
+from mantis_sim.scene import Scene, load_scene
+from mantis_sim.spread import quantiles
+from mantis_sim.studies.shared.blas import one_blas_thread
 
 STATUS_OK, STATUS_NO_STRIKE, STATUS_FAILED = 'ok', 'no strike', 'failed'
 ID_COLUMN = 'design_id'
@@ -182,7 +182,7 @@ def _run_nominal(scene: Scene, values: dict) -> dict:
 def run_chunk(scene_name: str, overrides: list, chunk: list[dict], spread_robots: int = 0,
               spread_seed: int = 1) -> list[dict]:
     """Rows of several designs of one scene: what a worker runs (the scene loaded once, BLAS
-    on one thread as on any worker: mantis_sim.blas)."""
+    on one thread as on any worker: mantis_sim.studies.shared.blas)."""
     one_blas_thread()
     scene = _loaded(scene_name, tuple(overrides))
     return [run_design(scene, values, spread_robots, spread_seed) for values in chunk]

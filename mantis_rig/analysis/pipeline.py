@@ -1,4 +1,5 @@
-"""Whole-trial analysis: tracks or joint angles in, time series and a summary out."""
+"""The analysis pipeline: one trial's tracks (or joint angles) in, time series and a summary out
+(the linkage fit, smoothing, phases, onset, energies, the checks on the result)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -17,6 +18,7 @@ from .energy import (
     tendon_length_mm,
     tendon_work_mJ,
 )
+from .inputs import MIN_FRAMES, MarkerTracks, TrackFormatError
 from .kinematics import (
     MIN_STRIKE_ROTATION_RAD,
     STRIKE_SPEED_SHARE,
@@ -34,7 +36,6 @@ from .smoothing import (
     smooth_angle,
     smoothing_spline_fit,
 )
-from .tracking import MIN_FRAMES, MarkerTracks, TrackFormatError
 
 
 @dataclass

@@ -1,10 +1,12 @@
-"""The analysis's one type of marker data: :class:`MarkerTracks`, millimetres in the tracker's
-camera frame, with the frame's orientation (handedness, tilt), the frame rate and the unit the
-numbers came in as fields.
+"""What every input becomes: :class:`MarkerTracks`, the analysis's one type of marker data
+(millimetres in the tracker's camera frame, with the frame's orientation (handedness, tilt), the
+frame rate and the unit the numbers came in as fields), and :class:`TrialInput`, a trial as read
+(its tracks, the tendon force if recorded, its conditions, the damage found); the readers' one
+error, :class:`TrackFormatError`.
 
 Every source becomes one: the tracker's exports (:mod:`.tracker_export`), the project's CSV
-(:mod:`.tracking`), a trial bag (:mod:`.bag_input`: its marker blocks are metres, converted
-here once) and the simulated camera study. ``docs/data_path.md`` has the layers and units.
+(:mod:`.project_csv`), a trial bag (:mod:`.bag`: its marker blocks are metres, converted there
+once) and the simulated camera study. ``docs/data_path.md`` has the layers and units.
 """
 from __future__ import annotations
 
@@ -19,6 +21,8 @@ MIN_FRAMES = 50
 # cell (read as a position, it would wreck every fit), not a position.
 MAX_COORDINATE_MM = 1e5
 HANDEDNESS = ('left', 'right')
+#: The tracker writes a lost marker as (-1, -1).
+LOST_MARKER = -1.0
 
 
 class TrackFormatError(InputError):
@@ -102,3 +106,25 @@ def frame_numbers(frames: np.ndarray, fname: str) -> np.ndarray:
     if not np.all(np.isfinite(frames)) or np.any(np.abs(frames) > 2 ** 53):
         raise TrackFormatError(f'{fname}: the frame column holds a non-finite or huge value')
     return frames.astype(np.int64)
+
+
+def lost_as_gaps(xy: np.ndarray) -> np.ndarray:
+    """(n, 2) positions with every lost frame NaN in both coordinates: the tracker's (-1, -1),
+    a blank or a non-finite cell."""
+    xy = np.array(xy, float)
+    xy[np.all(xy == LOST_MARKER, axis=1) | np.any(~np.isfinite(xy), axis=1)] = np.nan
+    return xy
+
+
+@dataclass
+class TrialInput:
+    """What the analysis needs from a trial, and how complete it was: the tracks, the tendon
+    force where the trial recorded it (a bag), what was wrong with a damaged input (read up to
+    the damage: ``truncated``), and the trial's conditions as recorded."""
+
+    tracks: MarkerTracks
+    force_time_s: np.ndarray | None = None
+    force_N: np.ndarray | None = None
+    problems: list = field(default_factory=list)
+    truncated: bool = False
+    conditions: dict = field(default_factory=dict)

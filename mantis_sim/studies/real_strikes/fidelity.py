@@ -2,10 +2,11 @@
 
 `simulate_strike` sets a scene to one strike's guide distance, contact angle and measured pull
 speed, runs it, and reports what the lab measures of a strike: peak tip speed, the lab's spring
-energy (strikes.lab_spring_energy_mJ of the deepest body turn), peak body and arm speeds, and
-the motion around phase IV on a time grid. `error_table` and `slopes` compare many of them
-with their real counterparts: per strike, per group, and the effects a design study varies
-(least squares with one intercept per recording day where asked, with standard errors).
+energy (mantis_sim.results.lab_spring_energy_mJ of the deepest body turn), peak body and arm
+speeds, and the motion around phase IV on a time grid. `error_table` and `slopes` compare many
+of them with their real counterparts: per strike, per group, and the effects a design study
+varies (least squares with one intercept per recording day where asked, with standard
+errors).
 """
 from __future__ import annotations
 
@@ -18,10 +19,10 @@ import numpy as np
 
 from mantis_sim.model import SimulationError
 from mantis_sim.parameters import ParameterError
-from mantis_sim.results import simulate
+from mantis_sim.results import lab_spring_energy_mJ, simulate
 from mantis_sim.scene import Scene
 
-from .strikes import RealStrike, StrikeSeries, lab_spring_energy_mJ
+from .strikes import RealStrike, StrikeSeries
 
 # Where the motion is compared, from the start of phase IV (s): the strike of air lasts ~5 ms,
 # that of water ~20 ms; the grid resolves the arm's fastest swing (~0.2 ms per radian).

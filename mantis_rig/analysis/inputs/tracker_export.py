@@ -16,20 +16,22 @@ What the reader makes of it:
   refused; a header-less CSV's times are seconds;
 - the calibration's tilt (degrees) and handedness are kept: the analysis turns the tracks back
   into the robot's frame with them (a header-less CSV states neither).
+
+The .xlsx is read with python-calamine (Rust): 5-10x openpyxl's time on the lab's exports, with
+the same rows (``test/system/test_tracker_export.py`` holds it to openpyxl's reading of every
+shared export; ``docs/performance.md#reading-the-trackers-spreadsheets``).
 """
 from __future__ import annotations
 
-import csv
-import io
+import datetime
 import math
 from pathlib import Path, PureWindowsPath
 import re
 
 import numpy as np
 
-from .tracks import MarkerTracks, TrackFormatError, frame_numbers
+from .base import MarkerTracks, TrackFormatError, frame_numbers, lost_as_gaps
 
-LOST_MARKER = -1.0
 # Millimetres per unit of the tracker's ``Export Units`` / ``Calibration Units``.
 UNIT_MM = {'millimeters': 1.0, 'millimetres': 1.0, 'mm': 1.0,
            'micrometers': 1e-3, 'micrometres': 1e-3, 'microns': 1e-3, 'um': 1e-3, 'µm': 1e-3,
@@ -82,14 +84,6 @@ def parse_calibration(text: str) -> dict:
     return out
 
 
-def lost_as_gaps(xy: np.ndarray) -> np.ndarray:
-    """(n, 2) positions with every lost frame NaN in both coordinates: the tracker's (-1, -1),
-    a blank or a non-finite cell."""
-    xy = np.array(xy, float)
-    xy[np.all(xy == LOST_MARKER, axis=1) | np.any(~np.isfinite(xy), axis=1)] = np.nan
-    return xy
-
-
 def rate_from_name(name: str) -> float | None:
     """Frames per second from a trial name such as ``111319_11kfps_T_2X_A_2_1_2p3_-10_5_2``."""
     m = _RATE_IN_NAME.search(name or '')
@@ -140,39 +134,65 @@ def parse_export_rows(rows: list[list], fname: str, frame_rate_hz: float | None 
         frame_rate_hz=rate, length_unit=unit)
 
 
-def read_export_xlsx_rows(path: Path) -> list[list]:
-    """The first worksheet's rows, as lists; damage is an TrackFormatError naming the file."""
-    import zipfile
+def read_export(rows: list[list], path: Path, fmt: str, frame_rate_hz: float | None = None,
+                length_unit: str | None = None) -> MarkerTracks:
+    """The validated tracks of an export's rows read from ``path`` (``fmt``: 'xlsx', 'csv')."""
+    tracks = parse_export_rows(rows, path.name, frame_rate_hz, length_unit,
+                               source={'path': str(path), 'format': fmt})
+    tracks.validate()
+    return tracks
 
-    from openpyxl import load_workbook
+
+def read_xlsx_rows(path: Path) -> list[list]:
+    """The first worksheet's rows, as lists, as openpyxl reads them (``data_only``, read-only)
+    but for a blank cell (``''``, not None); damage is a TrackFormatError naming the file."""
+    from python_calamine import CalamineError, CalamineWorkbook, SheetTypeEnum, XmlError
     try:
-        wb = load_workbook(path, read_only=True, data_only=True)
-    except (zipfile.BadZipFile, KeyError, OSError, ValueError, TypeError, IndexError,
-            EOFError) as exc:
-        raise TrackFormatError(f'{path.name}: not a readable .xlsx workbook ({exc})') from exc
-    except Exception as exc:       # openpyxl lets the XML parser's own errors through
+        wb = CalamineWorkbook.from_path(str(path))
+    except XmlError as exc:
         raise TrackFormatError(f'{path.name}: damaged .xlsx ({type(exc).__name__}: '
-                                f'{exc})') from exc
+                               f'{exc})') from exc
+    except (CalamineError, OSError) as exc:   # not a zip, or none of a workbook's parts
+        raise TrackFormatError(f'{path.name}: not a readable .xlsx workbook ({exc})') from exc
+    except BaseException as exc:  # noqa: BLE001 - see _damage
+        raise _damage(exc, f'{path.name}: damaged .xlsx') from exc
     try:
-        if not wb.worksheets:
-            raise TrackFormatError(f'{path.name}: the workbook has no worksheet')
         try:
-            return [list(r) for r in wb.worksheets[0].iter_rows(values_only=True)]
-        except Exception as exc:
-            raise TrackFormatError(f'{path.name}: damaged worksheet ({type(exc).__name__}: '
-                                    f'{exc})') from exc
+            sheets = [i for i, s in enumerate(wb.sheets_metadata)
+                      if s.typ == SheetTypeEnum.WorkSheet]
+            if not sheets:
+                raise TrackFormatError(f'{path.name}: the workbook has no worksheet')
+            rows = wb.get_sheet_by_index(sheets[0]).to_python(skip_empty_area=False)
+        except TrackFormatError:
+            raise
+        except BaseException as exc:  # noqa: BLE001 - see _damage
+            raise _damage(exc, f'{path.name}: damaged worksheet') from exc
     finally:
         wb.close()
+    _as_openpyxl_reads(rows)
+    return rows
 
 
-def read_export_csv_rows(text: str, fname: str) -> list[list]:
-    """The rows of a CSV text (any line endings); a malformed one is a TrackFormatError."""
-    reader = csv.reader(io.StringIO(text, newline=''))
-    try:
-        return list(reader)
-    except csv.Error as exc:
-        raise TrackFormatError(f'{fname}: not a readable CSV at line {reader.line_num} '
-                               f'({exc})') from None
+def _damage(exc: BaseException, what: str) -> TrackFormatError:
+    """What the parser raised on a damaged file, as a TrackFormatError: any exception, and a
+    panic of its Rust code (pyo3's PanicException, a BaseException); an interrupt or an exit
+    goes on as it is."""
+    if isinstance(exc, (KeyboardInterrupt, SystemExit, GeneratorExit, MemoryError)):
+        raise exc
+    return TrackFormatError(f'{what} ({type(exc).__name__}: {exc})')
+
+
+def _as_openpyxl_reads(rows: list[list]) -> None:
+    """Cells above the data as openpyxl reads them, in place: a whole number is an int (the
+    file writes '19000', calamine reads every number as a float), a date a datetime. Only the
+    header block's text depends on it; the numbers below the column header become floats."""
+    end = next((i for i, r in enumerate(rows) if is_export_header(r)), len(rows) - 2) + 2
+    for row in rows[:end]:
+        for k, v in enumerate(row):
+            if isinstance(v, float) and v.is_integer() and abs(v) < 2 ** 53:
+                row[k] = int(v)
+            elif type(v) is datetime.date:
+                row[k] = datetime.datetime.combine(v, datetime.time())
 
 
 # ------------------------------------------------------------------------------- internals
@@ -247,6 +267,9 @@ def _cell_number(v) -> float:
 
 
 def _numeric_table(rows: list[list], fname: str, first_row: int) -> np.ndarray:
+    table = _numeric_table_at_once(rows)
+    if table is not None:
+        return table
     body = []
     for k, row in enumerate(rows):
         if not row or all(not _text(v) for v in row):
@@ -265,6 +288,26 @@ def _numeric_table(rows: list[list], fname: str, first_row: int) -> np.ndarray:
         table[k, :len(r)] = r
     # A trailing empty column (a trailing comma) carries nothing.
     return table
+
+
+def _numeric_table_at_once(rows: list[list]) -> np.ndarray | None:
+    """The table of rows of one width, converted by numpy at once (blank cells NaN, blank
+    rows dropped), as the cell-by-cell conversion makes it; None if they are ragged or hold
+    anything numpy does not turn into the same number (text, blanks of spaces, dates): then the
+    cell-by-cell conversion names the row."""
+    rows = [r for r in rows if r]
+    if not rows or any(len(r) != len(rows[0]) for r in rows):
+        return None
+    cells = np.array(rows, dtype=object)
+    if cells.ndim != 2:
+        return None
+    blank = np.equal(cells, '') | np.equal(cells, None)
+    cells[blank] = math.nan
+    try:
+        table = cells.astype(np.float64)
+    except (TypeError, ValueError, OverflowError):
+        return None
+    return table[~blank.all(axis=1)] if blank.any() else table
 
 
 def _is_number(v) -> bool:

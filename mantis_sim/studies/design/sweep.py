@@ -1,6 +1,6 @@
 """`mantis sweep`: many simulated strikes, one row per design, in a Parquet table.
 
-The designs (mantis_sim.designs) go out in chunks, so that scheduling costs little against a
+The designs (`designs`) go out in chunks, so that scheduling costs little against a
 strike of a few ms: to a dask.distributed LocalCluster on this machine's cores (embedded, no
 server to start; it listens on 127.0.0.1 only), to an existing cluster (``scheduler``
 ``tcp://HOST:PORT``), or, with ``workers=0``, through this process alone. A design is computed
@@ -17,11 +17,10 @@ import os
 from pathlib import Path
 import time
 
-from mantis_sim.designs import ID_COLUMN, SPREAD_ROBOTS_COLUMN, STATUS_OK, run_chunk
 from mantis_sim.errors import InputError
 from mantis_sim.results import force_warnings
-
-from .parallel import Progress, connect
+from mantis_sim.studies.design.designs import ID_COLUMN, SPREAD_ROBOTS_COLUMN, STATUS_OK, run_chunk
+from mantis_sim.studies.shared.parallel import Progress, connect
 
 CHECKPOINT_S = 10.0
 CHUNK_TARGET_S = 0.2            # wall time of one chunk: scheduling costs ~ms per task
@@ -111,10 +110,10 @@ def run_sweep(scene_name: str, overrides: list, designs: list[dict], out: Path, 
               spread_seed: int = 1) -> SweepSummary:
     """Compute the designs ``out`` lacks and write the table (module docstring). With
     ``spread_robots`` N, each row also holds its quantiles over N robots of the scene's spread
-    (mantis_sim.designs); an earlier row without them, or with another N or seed, is
+    (mantis_sim.studies.design.designs); an earlier row without them, or with another N or seed, is
     computed again."""
-    from mantis_sim.designs import design_id
     from mantis_sim.scene import load_scene
+    from mantis_sim.studies.design.designs import design_id
     out = Path(out)
     capacity_n = load_scene(scene_name, overrides).loadcell.capacity_N
     earlier = {row[ID_COLUMN]: _with_warning(row, capacity_n) for row in read_table(out)

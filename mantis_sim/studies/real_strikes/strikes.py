@@ -13,11 +13,9 @@ the lab's overcentering) decides most of a strike's stored energy and is not amo
 conditions (docs/fidelity.md); a table may give it (column `seat_deg`), or a processed record
 shows it at the table's overcentering time `t_oc_s`.
 
-The lab's spring energy is a convention, not a model's: k_s/2 (theta1 - theta1_rest)^2 of the
-body angle at phase IV, with k_s = 47.7 N mm/rad and theta1_rest = 4.0736 rad (every row of
-the authors' table satisfies it with that rest angle, to 3e-4 rad). A simulated strike's
-spring energy is computed the same way from the simulated body's deepest turn, so that both
-sides use one formula whatever spring a model has.
+The lab's spring energy (`spring_energy_mJ`) is the lab's convention of the body angle at
+phase IV (mantis_sim.results.lab_spring_energy_mJ), which a simulated strike's deepest body turn
+is given too, so that both sides use one formula whatever spring a model has.
 """
 from __future__ import annotations
 
@@ -31,9 +29,6 @@ from typing import Optional
 import numpy as np
 
 from mantis_sim.errors import InputError
-
-LAB_SPRING_K_NMM_PER_RAD = 47.7
-LAB_THETA1_REST_RAD = 4.0736
 
 MEDIA = ('air', 'water')
 # What is kept of a record around phase IV (s): the strike and its approach, not the seconds of
@@ -57,11 +52,6 @@ SEAT_MIN_INTO_RECORD_S = 0.05
 
 class StrikeDataError(InputError):
     """A strike table or record cannot be used; the message names the file, row and column."""
-
-
-def lab_spring_energy_mJ(theta1_rad: float) -> float:
-    """The lab's spring energy (mJ) of a body angle (module docstring)."""
-    return 0.5 * LAB_SPRING_K_NMM_PER_RAD * (theta1_rad - LAB_THETA1_REST_RAD) ** 2
 
 
 @dataclass(frozen=True)
@@ -292,7 +282,6 @@ def record_times(path: Path, column: str) -> dict[str, float]:
     return out
 
 
-__all__ = ['LAB_SPRING_K_NMM_PER_RAD', 'LAB_THETA1_REST_RAD', 'RealStrike', 'StrikeDataError',
-           'StrikeSeries', 'attach_processed_records', 'lab_spring_energy_mJ',
+__all__ = ['RealStrike', 'StrikeDataError', 'StrikeSeries', 'attach_processed_records',
            'phase_iv_times', 'read_processed_record', 'read_strikes', 'read_summary_table',
            'record_times', 'seat_in_record']

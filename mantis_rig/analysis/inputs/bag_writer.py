@@ -1,4 +1,5 @@
-"""Write imported marker tracks (and the angles derived from them) into a trial bag.
+"""Write imported marker tracks (and the angles derived from them) into a trial bag: the way
+back of :mod:`.bag` (millimetres to metres here), for ``mantis import-tracking``.
 
 The bag carries what the camera node records, so one analysis path serves simulated, rig and
 imported trials:
@@ -13,7 +14,7 @@ imported trials:
 * metadata ``trial_conditions`` (source file, format, the file's header block, the camera
   frame's ``handedness`` and ``tilt_deg`` (left out where the file states no tilt), the frame
   rate, and the d_t and contact angle the user states for the trial), which
-  :mod:`.bag_input` reads back, and
+  :mod:`.bag` reads back, and
   ``tracking_fit`` (fitted body pivot in the tracker's frame as recorded, and L1).
 
 Log times (and JointState stamps) are the file's times shifted so none is negative:
@@ -23,16 +24,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 
-from ..contract import JOINT_ANGLES, MARKERS, resolve
-from ..recording import TRIAL_CONDITIONS, BagWriter
-from ..recording.marker_block import FRAMES_PER_BLOCK, marker_block_to_msg
-from .report import TrialAnalysis
-from .tracking import MarkerTracks
+from ...contract import JOINT_ANGLES, MARKERS, resolve
+from ...recording import TRIAL_CONDITIONS, BagWriter
+from ...recording.marker_block import FRAMES_PER_BLOCK, marker_block_to_msg
+from .base import MarkerTracks
+
+if TYPE_CHECKING:              # the analysis's result, written; the inputs do not import it
+    from ..pipeline import TrialAnalysis
 
 MARKERS_TOPIC = resolve(MARKERS)          # an imported trial's bag: the root namespace
 ANGLES_TOPIC = resolve(JOINT_ANGLES)

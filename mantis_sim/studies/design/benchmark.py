@@ -9,9 +9,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 import statistics
 
-from .fast import warm_up
-from .results import simulate
-from .scene import load_scene
+from mantis_sim.fast import warm_up
+from mantis_sim.results import simulate
+from mantis_sim.scene import load_scene
 
 # scipy's solvers, and the fast path (the compiled Radau of mantis_sim.fast)
 SOLVERS = ('RK23', 'RK45', 'DOP853', 'LSODA', 'Radau', 'BDF', 'fast')

@@ -1,4 +1,5 @@
-"""Read a trial bag into analysis inputs: MarkerTracks (mm) and the tendon force samples.
+"""A trial bag (rosbag2/MCAP), read into a :class:`~.base.TrialInput`: MarkerTracks (mm) and
+the tendon force samples.
 
 The marker frames come from the contract's ``camera/markers`` (marker blocks, metres, camera
 frame; see :mod:`mantis_rig.recording.marker_block`), converted to millimetres here (the one
@@ -19,54 +20,18 @@ damage suffice is for the analysis to decide.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 import math
-from pathlib import Path
 import warnings
 
 import numpy as np
 
-from ..contract import FORCE_BLOCK, MARKERS, bag_namespace, resolve
-from ..recording import BagError, BagReader, TruncatedBagWarning
-from ..recording.force_block import force_block_from_msg
-from ..recording.marker_block import concatenate, marker_block_from_msg
-from .tracking import load_tracks
-from .tracks import HANDEDNESS, MarkerTracks, TrackFormatError
+from ...contract import FORCE_BLOCK, MARKERS, bag_namespace, resolve
+from ...recording import BagError, BagReader, TruncatedBagWarning
+from ...recording.force_block import force_block_from_msg
+from ...recording.marker_block import concatenate, marker_block_from_msg
+from .base import HANDEDNESS, MarkerTracks, TrackFormatError, TrialInput
 
 _MM_PER_M = 1000.0
-
-
-@dataclass
-class TrialInput:
-    """What the analysis needs from a trial, and how complete it was."""
-
-    tracks: MarkerTracks
-    force_time_s: np.ndarray | None = None
-    force_N: np.ndarray | None = None
-    problems: list = field(default_factory=list)
-    truncated: bool = False
-    conditions: dict = field(default_factory=dict)
-
-
-def is_bag_path(path) -> bool:
-    """A bag directory or an .mcap file (anything else is taken for a tracking file)."""
-    path = Path(path)
-    return path.is_dir() or path.suffix == '.mcap'
-
-
-def load_trial_input(path, frame_rate_hz: float | None = None,
-                     length_unit: str | None = None) -> TrialInput:
-    """A trial bag (directory or .mcap) or a tracking file (.csv, .csv.gz, .xlsx).
-
-    ``frame_rate_hz`` and ``length_unit`` go to :func:`load_tracks` (what a tracker export
-    leaves out or gets wrong); a bag states both itself, so with a bag they are a ValueError.
-    """
-    if is_bag_path(path):
-        if frame_rate_hz is not None or length_unit is not None:
-            raise ValueError(f'{path}: the frame rate and length unit apply to tracking files; '
-                             'a bag states its own')
-        return read_trial_bag(path)
-    return TrialInput(tracks=load_tracks(path, frame_rate_hz, length_unit))
 
 
 def _frame_numbers(time_s: np.ndarray) -> np.ndarray:

@@ -1,0 +1,4 @@
+"""What the studies share, beside them: the Dask map and its progress line (`parallel`), BLAS on
+one thread in a process that simulates for a study (`blas`), CSV tables (`csv_table`). The
+command line imports the map from here directly; the simulator (mantis_sim's top level) takes a
+map as an argument and imports nothing from the studies."""
