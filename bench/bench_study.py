@@ -15,6 +15,7 @@ import argparse
 import os
 from pathlib import Path
 import re
+import resource
 import signal
 import statistics
 import subprocess
@@ -44,8 +45,14 @@ def plan_mapping(repeats: int) -> dict:
             'repeats': repeats, 'order': 'random', 'seed': 5}
 
 
-def run_bare(plan, out: Path) -> tuple[float, int]:
-    """(wall s from the bring-up's start to its exit, trials done)."""
+def children_cpu_s() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def run_bare(plan, out: Path) -> tuple[float, int, float]:
+    """(wall s from the bring-up's start to its exit, trials done, CPU s of its processes)."""
+    cpu0 = children_cpu_s()
     start = time.monotonic()
     bringup = subprocess.Popen(
         [sys.executable, '-m', 'mantis_rig.cli', 'bringup', '--backend', 'sim',
@@ -71,10 +78,11 @@ def run_bare(plan, out: Path) -> tuple[float, int]:
         rclpy.shutdown()
         os.killpg(bringup.pid, signal.SIGINT)
         bringup.wait(60)
-    return time.monotonic() - start, done
+    return time.monotonic() - start, done, children_cpu_s() - cpu0
 
 
-def run_study(plan_path: Path, out: Path) -> tuple[float, int]:
+def run_study(plan_path: Path, out: Path) -> tuple[float, int, float]:
+    cpu0 = children_cpu_s()
     start = time.monotonic()
     status = subprocess.run(
         [sys.executable, '-m', 'mantis_rig.cli', 'study', str(plan_path), '--out', str(out),
@@ -83,7 +91,7 @@ def run_study(plan_path: Path, out: Path) -> tuple[float, int]:
     wall = time.monotonic() - start
     assert status == 0, f'mantis study exited {status}'
     rows = read_record(out / 'study.csv').rows
-    return wall, sum(r['status'] == 'done' for r in rows)
+    return wall, sum(r['status'] == 'done' for r in rows), children_cpu_s() - cpu0
 
 
 def main() -> int:
@@ -106,18 +114,18 @@ def main() -> int:
             plan_path = tmp / 'plan.yaml'
             plan_path.write_text(yaml.safe_dump(mapping))
             for k in range(args.rounds):
-                wall, done = run_bare(plan, tmp / f'bare{k}')
-                bare.append((wall, done))
-                print(f'bare:  {trials} trials, {done} done, {wall:.1f} s '
-                      f'({wall / trials:.2f} s a trial)', flush=True)
-                wall, done = run_study(plan_path, tmp / f'study{k}')
-                study.append((wall, done))
-                print(f'study: {trials} trials, {done} done, {wall:.1f} s '
-                      f'({wall / trials:.2f} s a trial)', flush=True)
+                for name, runs, run, args_ in (('bare', bare, run_bare, (plan, tmp / f'bare{k}')),
+                                               ('study', study, run_study,
+                                                (plan_path, tmp / f'study{k}'))):
+                    wall, done, cpu = run(*args_)
+                    runs.append((wall, done, cpu))
+                    print(f'{name}: {trials} trials, {done} done, {wall:.1f} s '
+                          f'({wall / trials:.2f} s a trial), CPU {cpu:.0f} s '
+                          f'({cpu / trials:.2f} s a trial)', flush=True)
     finally:
         release_domain(domain)
-    bare_s = statistics.median(w for w, _ in bare)
-    study_s = statistics.median(w for w, _ in study)
+    bare_s = statistics.median(w for w, *_ in bare)
+    study_s = statistics.median(w for w, *_ in study)
     overhead = study_s / bare_s - 1.0
     print(f'overhead: {100 * overhead:+.1f} % of the bare trials\' wall time (goal: at most 10 %)')
     if args.write:
@@ -128,8 +136,8 @@ def main() -> int:
 def write_doc(trials: int, bare: list, study: list, overhead: float) -> None:
     path = REPO / 'docs' / 'performance.md'
     text = path.read_text(encoding='utf-8')
-    rows = '\n'.join(f'| {k + 1} | {b[0]:.1f} ({b[0] / trials:.2f}) | {b[1]} | '
-                     f'{s[0]:.1f} ({s[0] / trials:.2f}) | {s[1]} |'
+    rows = '\n'.join(f'| {k + 1} | {b[0]:.1f} ({b[0] / trials:.2f}) | {b[2]:.0f} | {b[1]} | '
+                     f'{s[0]:.1f} ({s[0] / trials:.2f}) | {s[2]:.0f} | {s[1]} |'
                      for k, (b, s) in enumerate(zip(bare, study)))
     section = (
         f'{SECTION}\n\nWritten by `bench/bench_study.py --write`: {trials} trials of the guide '
@@ -138,8 +146,8 @@ def write_doc(trials: int, bare: list, study: list, overhead: float) -> None:
         f'client setting each trial\'s conditions and starting it in the same order) against '
         f'`mantis study` (the twin\'s forecasts, every bag measured and judged, the report), '
         f'each from its start to its exit. {stamp()}.\n\n'
-        f'| round | bare: wall s (per trial) | done | study: wall s (per trial) | done |\n'
-        f'|---|---|---|---|---|\n{rows}\n\n'
+        f'| round | bare: wall s (per trial) | CPU s | done | study: wall s (per trial) | '
+        f'CPU s | done |\n|---|---|---|---|---|---|---|\n{rows}\n\n'
         f'The study\'s overhead: **{100 * overhead:+.1f} %** of the bare trials\' wall time '
         f'(goal: at most 10 %).\n')
     pattern = re.compile(rf'{re.escape(SECTION)}\n.*?(?=\n## |\Z)', re.S)

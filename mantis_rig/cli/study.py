@@ -5,7 +5,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import RIG_FAULT, USAGE_ERROR, InputError
+from mantis_sim.errors import InputError
+
+from ..errors import RIG_FAULT, USAGE_ERROR
 from .trial import PROCESSES
 
 USAGE = """mantis study PLAN --out DIR [options]     run (or resume) a study on a rig

@@ -1,5 +1,6 @@
 """The study's analyst: one worker process, started fresh (spawn), that simulates the twin's
-forecast ensembles and measures each trial's bag while the rig runs the next trial. It runs
+forecast ensembles and measures each trial's bag while the rig runs the next trial, and
+writes the report while the rig's stack shuts down. It runs
 at a lower priority than the rig's processes, with one BLAS thread: a trial in progress keeps
 the machine first. Results come back in the order the work was asked for."""
 from __future__ import annotations
@@ -13,15 +14,18 @@ import signal
 NICENESS = 10
 
 
-def _start_worker() -> None:
+def _start_worker(parent_pid: int) -> None:
     # The study's process stops the study on Ctrl-C; the terminal sends it to the worker too,
-    # which is ended by its pool, not by a traceback of its own.
+    # which is ended by its pool, not by a traceback of its own. A study process that is
+    # killed outright leaves no worker behind: the worker ends itself once its parent is gone.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from mantis_rig.nodes.stopping import watch_parent
+    watch_parent(parent_pid)
     try:
         os.nice(NICENESS)
     except OSError:
         pass
-    from mantis_sim.blas import one_blas_thread
+    from mantis_sim.studies.shared.blas import one_blas_thread
     one_blas_thread()
 
 
@@ -41,10 +45,17 @@ def _measure(bag: str) -> dict:
         return {'analysis_note': f'cannot measure {bag}: {type(exc).__name__}: {exc}'}
 
 
+def _report(directory: str) -> tuple[str, list]:
+    from mantis_rig.study.report import write_report
+    said: list = []
+    path = write_report(Path(directory), say=said.append)
+    return str(path), said
+
+
 class Analyst:
     def __init__(self):
         self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context('spawn'),
-                                         initializer=_start_worker)
+                                         initializer=_start_worker, initargs=(os.getpid(),))
 
     def ensemble(self, scene_name: str, overrides: list, conditions: dict, robots: int,
                  seed: int, slack_force_N: float) -> Future:
@@ -54,8 +65,19 @@ class Analyst:
     def measure(self, bag: Path) -> Future:
         return self._pool.submit(_measure, str(bag))
 
+    def report(self, directory: Path) -> Future:
+        """The study's report, written while the rig's stack shuts down: (its folder, the
+        lines it has to say)."""
+        return self._pool.submit(_report, str(directory))
+
     def close(self, wait: bool = True) -> None:
+        """Wait for the work asked for, or (``wait`` False) drop it and end the worker now."""
+        workers = list(getattr(self._pool, '_processes', {}).values())
         self._pool.shutdown(wait=wait, cancel_futures=not wait)
+        if not wait:
+            for worker in workers:
+                worker.terminate()
+                worker.join(5.0)
 
 
 __all__ = ['Analyst']

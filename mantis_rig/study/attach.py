@@ -7,7 +7,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import InputError
+from mantis_sim.errors import InputError
+
 from .measure import marker_quantities
 from .record import DONE, RECORD_NAME, read_record
 from .runner import judge_rows, plan_as_run, study_forecaster

@@ -15,14 +15,37 @@ from pathlib import Path
 import numpy as np
 
 from mantis_rig import contract
-from mantis_rig.recording import BagReader
+from mantis_rig.recording import TRIAL_OUTCOME, BagReader
 from mantis_rig.recording.force_block import force_block_from_msg
 from mantis_rig.recording.trial_summary import summarize
 
 
 def force_quantities(bag: Path) -> dict:
     """peak_tendon_force_N, loading_work_mJ, release_time_s of a closed bag (NaN where the
-    bag does not show them: no pull, no release)."""
+    bag does not show them: no pull, no release): from the trial's outcome, which the
+    supervisor's force monitor wrote as the trial ran; from the bag's streams where the outcome
+    does not hold them (a bag of an older version, or recovered)."""
+    outcome = BagReader(bag, warn=False).metadata(TRIAL_OUTCOME) or {}
+    from_outcome = outcome_quantities(outcome)
+    if from_outcome is not None:
+        return from_outcome
+    return stream_quantities(bag)
+
+
+def outcome_quantities(outcome: dict) -> dict | None:
+    """The force quantities a trial outcome states, or None if it lacks any of them."""
+    try:
+        states = dict(item.split('@') for item in outcome['states'].split(';') if '@' in item)
+        peak, work = float(outcome['peak_force_n']), float(outcome['loading_work_mj'])
+        release, pull = float(outcome['release_time_s']), float(states['pulling'])
+    except (KeyError, ValueError):
+        return None
+    return {'peak_tendon_force_N': peak, 'loading_work_mJ': work,
+            'release_time_s': release - pull}
+
+
+def stream_quantities(bag: Path) -> dict:
+    """The force quantities from the bag's force and stage streams."""
     summary = summarize(bag)
     out = {'peak_tendon_force_N': math.nan, 'loading_work_mJ': math.nan,
            'release_time_s': math.nan}

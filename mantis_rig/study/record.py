@@ -17,11 +17,10 @@ import math
 import os
 from pathlib import Path
 
+from mantis_sim.errors import InputError
 from mantis_sim.studies.rig_study.judge import forecast_columns
 from mantis_sim.studies.rig_study.plan import CONDITION_KEYS
 from mantis_sim.studies.rig_study.quantities import QUANTITIES
-
-from ..errors import InputError
 
 RECORD_NAME = 'study.csv'
 PENDING, STARTING, RUNNING = 'pending', 'starting', 'running'

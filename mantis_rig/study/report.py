@@ -7,7 +7,6 @@ from collections import Counter
 import math
 from pathlib import Path
 
-from mantis_sim.studies.csv_table import write_rows
 from mantis_sim.studies.rig_study.effects import study_effects
 from mantis_sim.studies.rig_study.figures import (
     effects_figure,
@@ -15,6 +14,7 @@ from mantis_sim.studies.rig_study.figures import (
     pit_histogram,
 )
 from mantis_sim.studies.rig_study.quantities import QUANTITIES, condition_axis
+from mantis_sim.studies.shared.csv_table import write_rows
 
 from .record import ABORTED, DONE, INTERRUPTED, OWED, RECORD_NAME, read_record
 from .runner import plan_as_run, study_forecaster

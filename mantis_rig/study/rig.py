@@ -17,6 +17,7 @@ import threading
 import time
 from typing import Optional
 
+from mantis_sim.studies.rig_study.plan import CONDITION_KEYS
 from mantis_sim.studies.rig_study.quantities import CONDITION_LABELS
 
 from ..errors import StackError
@@ -41,6 +42,9 @@ class ClientRig:
         ok, message = self.client.set_parameters(values)
         if not ok:
             raise ConditionError(f'the supervisor refused a trial condition: {message}')
+
+    def conditions(self) -> dict:
+        return self.client.get_parameters(CONDITION_KEYS)
 
     def start(self) -> Path:
         ok, message = self.client.start_trial()

@@ -23,6 +23,7 @@ from typing import Optional, Protocol
 
 import yaml
 
+from mantis_sim.errors import InputError
 from mantis_sim.scene import load_scene
 from mantis_sim.studies.rig_study.effects import auto_repeats
 from mantis_sim.studies.rig_study.forecast import DAY_QUANTITY, StudyForecaster
@@ -30,7 +31,6 @@ from mantis_sim.studies.rig_study.judge import judge
 from mantis_sim.studies.rig_study.plan import CONDITION_KEYS, StudyPlan, plan_from_mapping
 from mantis_sim.studies.rig_study.quantities import QUANTITIES
 
-from ..errors import InputError
 from ..recording import TRIAL_OUTCOME, BagReader
 from .record import (
     ABORTED,
@@ -60,6 +60,7 @@ class StudyError(InputError):
 
 class RigPort(Protocol):
     def set_conditions(self, values: dict) -> None: ...     # the supervisor's parameters
+    def conditions(self) -> dict: ...               # its trial conditions (CONDITION_KEYS)
     def start(self) -> Path: ...                            # the new trial's bag directory
     def follow(self, on_state: Callable[[str], None]) -> tuple[str, str]: ...  # (final, reason)
 
@@ -99,6 +100,7 @@ class StudyRunner:
         self._ensembles: dict = {}
         self._measuring: dict = {}      # id(row) -> (row, Future)
         self.current: Optional[dict] = None
+        self._judged_all = False
 
     # ------------------------------------------------------------------ the record
     def open(self) -> StudyRecord:
@@ -215,10 +217,20 @@ class StudyRunner:
             self.forecaster = StudyForecaster(scene, ensembles, self.plan.seed)
         return self.forecaster
 
-    def judge_rows(self) -> None:
-        forecaster = self._forecaster(wait=False)
-        if forecaster is not None:
+    def judge(self, arrived: list, every_row: bool) -> None:
+        """Judge the rows whose measurements have just ``arrived`` (every row the first time
+        the forecasts are there, and with ``every_row``): a trial's forecast depends only on
+        the day's earlier ones, so judging each as it lands keeps a long study's cost per
+        trial flat."""
+        forecaster = self._forecaster(wait=every_row)
+        if forecaster is None:
+            return
+        if every_row or not self._judged_all:
             judge_rows(self.record.rows, forecaster)
+            self._judged_all = True
+        else:
+            for row in arrived:
+                judge_row(self.record.rows, row, forecaster)
 
     # ------------------------------------------------------------------ measuring
     def _measure_unmeasured(self) -> None:
@@ -232,7 +244,7 @@ class StudyRunner:
 
     def collect(self, wait: bool = False) -> None:
         """Fill the rows whose measurements are back (all of them with ``wait``)."""
-        changed = False
+        arrived = []
         for key, (row, future) in list(self._measuring.items()):
             if not wait and not future.done():
                 continue
@@ -243,10 +255,10 @@ class StudyRunner:
             if note:
                 row['reason'] = f'markers not analysed: {note}'
             del self._measuring[key]
-            changed = True
+            arrived.append(row)
             self._say_measured(row)
-        if changed or wait:
-            self.judge_rows()
+        if arrived or wait:
+            self.judge(arrived, every_row=wait)
             self.record.save()
 
     def _say_measured(self, row: dict) -> None:
@@ -278,6 +290,7 @@ class StudyRunner:
     def _run_trial(self, row: dict) -> None:
         conditions = {k: row[k] for k in CONDITION_KEYS if row.get(k) is not None}
         self.rig.set_conditions({**conditions, 'out': str((self.directory / BAGS).resolve())})
+        row.update(self.rig.conditions())        # the rig's own for what the plan leaves open
         now = datetime.now(UTC)
         row.update(status=STARTING, started_utc=now.isoformat(timespec='seconds'),
                    day=day_of(now), video=video_name(self.directory, row))
@@ -339,6 +352,26 @@ class StudyRunner:
             self.say(f'  run {row["run"]}: {row["cause"]}')
 
 
+def _conditions(row: dict) -> dict:
+    return {k: row[k] for k in CONDITION_KEYS if row.get(k) is not None}
+
+
+def _day_strike(row: dict) -> Optional[tuple]:
+    """(conditions, DAY_QUANTITY) of a row that measured it, else None."""
+    value = row.get(DAY_QUANTITY)
+    if row['status'] == DONE and value is not None and math.isfinite(value):
+        return _conditions(row), value
+    return None
+
+
+def _judge(row: dict, earlier: list, forecaster: StudyForecaster) -> None:
+    forecast = forecaster.forecast(_conditions(row), earlier)
+    verdict = judge(forecast, {q: row.get(q) for q in QUANTITIES})
+    row.update(verdict.values)
+    row.update(flags=' '.join(verdict.flagged), cause=verdict.cause,
+               day_strikes=forecast.day_strikes)
+
+
 def judge_rows(rows: list, forecaster: StudyForecaster) -> None:
     """Every row's forecast, from the day's earlier measured strikes, and its judgement
     (rows in run order; a row not yet run is forecast as of today)."""
@@ -346,15 +379,18 @@ def judge_rows(rows: list, forecaster: StudyForecaster) -> None:
     by_day: dict = {}
     for row in rows:
         earlier = by_day.setdefault(row.get('day') or today, [])
-        conditions = {k: row[k] for k in CONDITION_KEYS if row.get(k) is not None}
-        forecast = forecaster.forecast(conditions, earlier)
-        verdict = judge(forecast, {q: row.get(q) for q in QUANTITIES})
-        row.update(verdict.values)
-        row.update(flags=' '.join(verdict.flagged), cause=verdict.cause,
-                   day_strikes=forecast.day_strikes)
-        value = row.get(DAY_QUANTITY)
-        if row['status'] == DONE and value is not None and math.isfinite(value):
-            earlier.append((conditions, value))
+        _judge(row, list(earlier), forecaster)
+        strike = _day_strike(row)
+        if strike is not None:
+            earlier.append(strike)
+
+
+def judge_row(rows: list, row: dict, forecaster: StudyForecaster) -> None:
+    """One row's forecast and judgement, from the earlier rows of its day (what a trial that
+    has just been measured needs: the rows after it are judged at the study's end)."""
+    earlier = [strike for r in rows[:rows.index(row)] if r.get('day') == row.get('day')
+               for strike in [_day_strike(r)] if strike is not None]
+    _judge(row, earlier, forecaster)
 
 
 def plan_as_run(directory: Path) -> StudyPlan:
@@ -431,4 +467,4 @@ def _cell_key(conditions: dict) -> tuple:
 
 
 __all__ = ['BAGS', 'Operator', 'PLAN_AS_RUN', 'RigPort', 'StudyError', 'StudyRunner',
-           'StudySetup', 'judge_rows', 'plan_as_run', 'study_forecaster', 'video_name']
+           'StudySetup', 'judge_row', 'judge_rows', 'plan_as_run', 'study_forecaster', 'video_name']

@@ -97,18 +97,21 @@ def _with_stack(plan: StudyPlan, config, args, signals) -> int:
     analyst = Analyst()
     runner = StudyRunner(setup, None, _operator(args.ask or not config.sim, config.namespace,
                                                 proceed), analyst, say=_say, progress=Progress())
+    report = None
     try:
         stack.start()
         if not client.wait_for_supervisor(60.0, stack.check_processes):
             raise StackError('the supervisor did not come up within 60 s')
         runner.rig = ClientRig(client, alive=stack.check_processes)
-        return _run(runner, signals)
+        status, report = _run(runner, signals, analyst)
+        return status
     finally:
         signals.shield()
         stack.stop(reason=signals.first.reason if signals.first else 'study ended',
                    signum=_signum(signals))
         client.destroy_node()
         node.destroy_node()
+        _say_report(report)
         analyst.close(wait=signals.first is None)
 
 
@@ -144,10 +147,10 @@ def run_connected(plan: StudyPlan, args) -> int:
         runner = StudyRunner(setup, ClientRig(client),
                              _operator(args.ask or backend != 'sim', args.namespace, proceed),
                              analyst, say=_say, progress=Progress())
-        status = _run(runner, signals)
-        if signals.first is None:
-            return status
-        client.call('abort', timeout_s=5.0)
+        status, report = _run(runner, signals, analyst)
+        if signals.first is not None:
+            client.call('abort', timeout_s=5.0)
+        _say_report(report)
         return status
     finally:
         signals.shield()
@@ -159,7 +162,9 @@ def run_connected(plan: StudyPlan, args) -> int:
             rclpy.shutdown()
 
 
-def _run(runner: StudyRunner, signals) -> int:
+def _run(runner: StudyRunner, signals, analyst) -> tuple:
+    """(exit status, the report's future): the report is written by the analyst while the
+    rig's stack shuts down."""
     from ..nodes.stopping import StopRequested
     try:
         runner.open()
@@ -169,13 +174,20 @@ def _run(runner: StudyRunner, signals) -> int:
         runner.interrupted(stop.reason)
         _say(f'mantis study: {stop.reason}: the trial in progress is recorded as interrupted; '
              f'run the same command again to resume ({runner.directory / RECORD_NAME})')
-        return stop.exit_status
+        return stop.exit_status, None
     except StackError as exc:
         runner.interrupted(f'rig fault: {exc}')
         raise
-    from .report import write_report
-    write_report(runner.directory, say=_say, forecaster=runner.forecaster, plan=runner.plan)
-    return 0
+    return 0, analyst.report(runner.directory)
+
+
+def _say_report(report) -> None:
+    if report is None:
+        return
+    folder, said = report.result()
+    for line in said:
+        _say(line)
+    _say(f'report: {folder}')
 
 
 def _signum(signals) -> int:

@@ -44,10 +44,15 @@ def test_a_study_on_the_hardware_rig_asks_the_person(tmp_path, monkeypatch):
                               'repeats': 1, 'order': 'as-listed', 'seed': 1, 'robots': 20},
                              'plan')
     out = tmp_path / 'study'
-    config = StackConfig(backend='hardware', supervisor={'out': str(out / 'bags')},
+    config = StackConfig(backend='hardware', supervisor={'out': str(out / 'bags'),
+                                                         'start_position_mm': 10.0},
                          devices={STAGE_NODE: {'serial_port': emulator.port,
                                                'move_speed_m_per_s': 2.0e-3}})
     said, reader, writer = [], *os.pipe()
+
+    def say(line):
+        said.append(line)
+        print(line, flush=True)             # shown by pytest when the test fails
     rclpy.init()
     stack = Stack(config)
     client = TrialClient()
@@ -58,13 +63,13 @@ def test_a_study_on_the_hardware_rig_asks_the_person(tmp_path, monkeypatch):
     answered = threading.Event()
 
     def person():
-        """Enter to the first prompt; the Trigger service to the second."""
-        for k in range(2):
-            while sum('press Enter' in line for line in said) <= k:
-                if answered.is_set():
-                    return
+        """Answers every prompt: with Enter, and every second one through the Trigger service."""
+        answered_prompts = 0
+        while not answered.is_set():
+            if sum('press Enter' in line for line in said) <= answered_prompts:
                 time.sleep(0.05)
-            if k == 0:
+                continue
+            if answered_prompts % 2 == 0:
                 os.write(writer, b'\n')
             else:
                 caller = rclpy.create_node('study_gui')
@@ -74,14 +79,15 @@ def test_a_study_on_the_hardware_rig_asks_the_person(tmp_path, monkeypatch):
                 rclpy.spin_until_future_complete(caller, future, timeout_sec=30.0)
                 assert future.result().success
                 caller.destroy_node()
+            answered_prompts += 1
 
     try:
         stack.start()
         assert client.wait_for_supervisor(60.0, stack.check_processes)
-        operator = PersonOperator(said.append, resolve(STUDY_CONTINUE),
+        operator = PersonOperator(say, resolve(STUDY_CONTINUE),
                                   stdin=os.fdopen(reader, 'r'), proceed=proceed)
         runner = StudyRunner(StudySetup(plan, out), ClientRig(client, stack.check_processes),
-                             operator, analyst, say=said.append, progress=said.append)
+                             operator, analyst, say=say, progress=say)
         threading.Thread(target=person, daemon=True).start()
         runner.open()
         rows = runner.run().rows

@@ -51,7 +51,7 @@ def test_a_days_level_is_read_back_from_its_strikes(twin):
         for seat in level + rng.normal(0.0, 1.4, 4):
             values = robot_quantities((scene.with_values(
                 {'geometry.d_t_mm': 23.0, 'drive.pull_speed_mm_per_s': 2.3,
-                 'geometry.latch_offset_deg': float(np.clip(seat, -3, 12))}), {}, 0.3))
+                 'geometry.latch_offset_deg': float(np.clip(seat, -3, 12))}), {}, 0.3, 0.5))
             strikes.append((CONDITIONS, values[DAY_QUANTITY]))
         mean, sd = forecaster.day_level(strikes)
         assert abs(mean - level) < 3 * sd + 0.5, (level, mean, sd)
@@ -72,7 +72,7 @@ def test_forecasts_of_strikes_drawn_as_the_twin_draws_them_are_calibrated(twin):
             seat = float(np.clip(level + rng.normal(0.0, lat.strike_sd), -3.0, 12.0))
             truth = robot_quantities((scene.with_values(
                 {'geometry.d_t_mm': 23.0, 'drive.pull_speed_mm_per_s': 2.3,
-                 'geometry.latch_offset_deg': seat}), {}, 0.3))
+                 'geometry.latch_offset_deg': seat}), {}, 0.3, rng.uniform()))
             value = truth[DAY_QUANTITY] * (1 + MEASUREMENT_ERROR[DAY_QUANTITY]
                                            * rng.normal())
             forecast = forecaster.forecast(CONDITIONS, earlier)

@@ -18,6 +18,8 @@ from mantis_sim.studies.rig_study.quantities import QUANTITIES
 PLAN = {'scene': 'air_23mm_rig', 'factors': {'d_t_mm': [19, 25], 'pull_speed_mm_s': [1.0, 2.3]},
         'repeats': 2, 'order': 'random', 'seed': 5, 'robots': 20}
 _ENSEMBLES = {}
+RIG_DEFAULTS = {'pull_speed_mm_s': 2.33, 'd_t_mm': 23.0, 'contact_angle_deg': 3.0,
+                'medium': 'air'}
 
 
 def _done(value) -> Future:
@@ -65,6 +67,9 @@ class FakeRig:
     def set_conditions(self, values):
         self._values = dict(values)
 
+    def conditions(self):
+        return {**RIG_DEFAULTS, **{k: v for k, v in self._values.items() if k in RIG_DEFAULTS}}
+
     def start(self) -> Path:
         n = len(self.started) + 1
         bag = Path(self._values['out']) / f'trial_{n:03d}'
@@ -111,6 +116,7 @@ def test_every_planned_trial_runs_once_with_its_forecast(tmp_path):
     for row in rows:
         assert (tmp_path / 'study' / row['bag']).is_dir()
         assert rig.started[row['run'] - 1]['d_t_mm'] == row['d_t_mm']
+        assert (row['contact_angle_deg'], row['medium']) == (3.0, 'air')   # the rig's own
         for name in QUANTITIES:
             assert row[name] == pytest.approx(measured(row)[name])
             qs = [row[f'{name}_q{k:02d}'] for k in range(5, 100, 5)]

@@ -11,7 +11,7 @@ ensemble's robots, resampled together at every combination.
 
 A difference delta is seen (two-sided test at the 5 % level, 80 % power) with
 n >= 2 (z_0.975 + z_0.8)^2 sd^2 / delta^2 strikes at each level
-(mantis_sim.studies.spread_effects.strikes_needed); a level of a factor gathers
+(mantis_sim.studies.design.spread_effects.strikes_needed); a level of a factor gathers
 (combinations / levels) strikes per repeat.
 """
 from __future__ import annotations
@@ -21,9 +21,8 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
-from scipy import stats
 
-from mantis_sim.studies.spread_effects import strikes_needed
+from mantis_sim.studies.design.spread_effects import strikes_needed
 
 from .forecast import StudyForecaster
 from .plan import StudyPlan
@@ -94,6 +93,7 @@ def measured_effects(plan: StudyPlan, rows: Sequence[Mapping], quantity: str) ->
     residual = y - x @ coef
     sd = math.sqrt(float(residual @ residual) / dof) if dof > 0 else math.nan
     cov = np.linalg.pinv(x.T @ x) * sd ** 2 if dof > 0 else None
+    from scipy import stats  # here: a study's runner imports this module, its report uses t
     t = stats.t.ppf(0.975, dof) if dof > 0 else math.nan
     for k, name in enumerate(names, start=1):
         if cov is None:
