@@ -12,6 +12,16 @@ and `supervisor_node`, a process each. One params file with a section per node, 
 `mantis bringup` writes it. The device nodes come up unconfigured; the supervisor configures
 and activates them. Other supervisor parameters: `ros2 param set /supervisor_node ...`.
 
+A node process that ends ends the stack (as `mantis bringup` does): an OnProcessExit handler per
+node (mantis_rig.nodes.watchdog.LaunchWatch) logs one line naming the process and the signal or
+exit status, gives that line to the supervisor as its trial's abort reason, stops the stage at
+the KDC101's port when the stage node's own process died on hardware, and shuts the launch down
+(the other nodes get SIGINT: the stage node stops the stage, the supervisor aborts its trial and
+closes its log). A node process frozen (stopped, SIGSTOP) is found every WATCH_PERIOD_S from its
+/proc state, killed, and reported the same way. A node that hangs while running is not found
+by the launch file (`mantis bringup` finds it from its /diagnostics); the stage node's own
+supervisor heartbeat stops a pull whose supervisor has gone quiet.
+
 Checked only statically (test/unit/test_launch_file.py parses this file: its executables against
 setup.py's console scripts, its parameters against the nodes' declared ones and against
 `mantis bringup`'s); `ros2 launch` is not installable from PyPI, so it has not been run here.
@@ -19,10 +29,20 @@ The functions above `generate_launch_description` use nothing from `launch`: the
 runs them (with the names they take from mantis_rig.contract).
 """
 import os
+import signal
 import tempfile
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.actions import (
+    DeclareLaunchArgument,
+    EmitEvent,
+    LogInfo,
+    OpaqueFunction,
+    RegisterEventHandler,
+    TimerAction,
+)
+from launch.event_handlers import OnProcessExit, OnShutdown
+from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 import yaml
@@ -32,8 +52,13 @@ from mantis_rig.contract import (
     DEVICE_NODES,
     SIM_RIG_PROCESS,
     SIM_WORLD_NODE,
+    STAGE_NODE,
     SUPERVISOR_NODE,
 )
+from mantis_rig.nodes.stopping import STOP_REASON_ENV
+from mantis_rig.nodes.watchdog import LaunchWatch
+
+WATCH_PERIOD_S = 0.5        # how often the node processes' /proc state is looked at
 
 # launch argument -> (default, description); the defaults are `mantis bringup`'s
 ARGUMENTS = {
@@ -91,8 +116,39 @@ def _stack(context):
     with os.fdopen(handle, 'w') as f:
         yaml.safe_dump({name: {'ros__parameters': values} for name, values in params.items()},
                        f)
-    return [Node(package='mantis_rig', executable=name, output='screen', parameters=[path])
-            for name in processes(backend)]
+    names = processes(backend)
+    watch = LaunchWatch(backend, params.get(STAGE_NODE, {}), path + '.reason')
+    nodes = [Node(package='mantis_rig', executable=name, output='screen', parameters=[path],
+                  additional_env={STOP_REASON_ENV: path + '.reason'})
+             for name in processes(backend)]
+    handlers = [RegisterEventHandler(OnProcessExit(
+        target_action=node, on_exit=lambda event, context, name=name: _ended(
+            watch, name, event, context))) for name, node in zip(names, nodes)]
+    handlers.append(RegisterEventHandler(OnShutdown(
+        on_shutdown=lambda event, context: watch.shutting_down())))
+    return nodes + handlers + [_look_for_frozen(watch, dict(zip(names, nodes)))]
+
+
+def _ended(watch, name, event, context):
+    """A node process ended: the first one's line, logged, and the launch shut down."""
+    if getattr(context, 'is_shutdown', False):
+        watch.shutting_down()
+    line = watch.on_exit(name, event.returncode)
+    if line is None:
+        return None
+    return [LogInfo(msg=f'mantis launch: {line}'), EmitEvent(event=Shutdown(reason=line))]
+
+
+def _look_for_frozen(watch, nodes):
+    """Every WATCH_PERIOD_S: a node process frozen (stopped) is killed; its exit handler then
+    reports it as frozen and ends the stack."""
+    def look(context):
+        pids = {name: (node.process_details or {}).get('pid') for name, node in nodes.items()}
+        name = watch.frozen(pids)
+        if name is not None:
+            os.kill(pids[name], signal.SIGKILL)
+        return [_look_for_frozen(watch, nodes)] if watch.fault is None else None
+    return TimerAction(period=WATCH_PERIOD_S, actions=[OpaqueFunction(function=look)])
 
 
 def generate_launch_description():

@@ -98,6 +98,7 @@ FORCE_GUARD_NODES = (STAGE_NODE, LOADCELL_NODE)
 #: side nodes (executors.SideNode): named <owner>_<suffix>, in the owner's namespace
 RECORDER_SUFFIX = 'recorder'
 FORCE_GUARD_SUFFIX = 'force_guard'
+HEARTBEAT_SUFFIX = 'heartbeat'
 PACING_SUFFIX = 'pacing'
 #: nodes of the command-line tools
 TRIAL_CLIENT_NODE = 'mantis_trial_client'
@@ -162,6 +163,26 @@ SUPERVISOR_STATE = Topic('supervisor/state', 'std_msgs/msg/String', STATE_QOS, S
                          'the trial state: idle, configuring, homing, taking_up_slack, taring, '
                          'arming, pulling, released, stopping, returning, done, aborted, '
                          'waiting_for_relatch (after a strike: a person re-latches the robot)')
+HEARTBEAT = Topic('supervisor/heartbeat', 'std_msgs/msg/Header', COMMAND_QOS, SUPERVISOR_NODE,
+                  'the supervisor is alive: every 50 ms (HEARTBEAT_PERIOD_S) from a thread of '
+                  'its own; stamp: its steady clock (CLOCK_MONOTONIC); stage_node stops a '
+                  'motion it commanded when it lapses `supervisor_heartbeat_timeout_s` (not '
+                  'recorded)')
+#: the supervisor's heartbeat period (s, steady clock)
+HEARTBEAT_PERIOD_S = 0.05
+
+
+def heartbeat_source(node_name: str, pid: int) -> str:
+    """A heartbeat's frame_id: the supervisor's name and its process. A stage node in the same
+    process does not watch it: a supervisor that froze would have frozen the stage node with
+    it, and a late beat there is only the two starving each other of the interpreter."""
+    return f'{node_name}@{pid}'
+
+
+def heartbeat_source_pid(frame_id: str) -> int | None:
+    """The process a heartbeat came from (None for a frame_id without one)."""
+    _, sep, pid = frame_id.rpartition('@')
+    return int(pid) if sep and pid.isdigit() else None
 DIAGNOSTICS = Topic('diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', STATUS_QOS,
                     f'{SIM_WORLD_NODE}, the device nodes, {SUPERVISOR_NODE}',
                     '1 Hz and on every state change; a status name starts with its node name')
@@ -180,7 +201,7 @@ JOINT_ANGLES = Topic('analysis/joint_angles', 'sensor_msgs/msg/JointState', SENS
 #: every topic a trial's bag holds (the recorder's)
 TRIAL_TOPICS = (JOINT_STATE, VELOCITY_COMMAND, POSITION_COMMAND, FORCE_BLOCK, WRENCH,
                 TRIGGER_TIME, MARKERS, SUPERVISOR_STATE, DIAGNOSTICS)
-TOPICS = (*TRIAL_TOPICS, CLOCK, JOINT_ANGLES)
+TOPICS = (*TRIAL_TOPICS, HEARTBEAT, CLOCK, JOINT_ANGLES)
 TOPIC_BY_NAME = {t.name: t for t in TOPICS}
 
 _TRIGGER = 'std_srvs/srv/Trigger'
@@ -309,9 +330,14 @@ class ParamSpec:
         return 'string'
 
 
-def _check_backend(value) -> None:
-    from mantis_rig.hardware.backends import check_backend
-    check_backend(value)
+def check_backend(backend: str) -> str:
+    """`backend` if it is one of BACKENDS, else a ConfigurationError naming the valid ones
+    (the `backend` parameter's check, and hardware.backends' before it builds a device)."""
+    if backend not in BACKENDS:
+        from mantis_rig.errors import ConfigurationError
+        raise ConfigurationError(f'unknown backend {backend!r}; valid backends: '
+                                 f'{", ".join(BACKENDS)}')
+    return backend
 
 
 def _check_scene(value) -> None:
@@ -354,10 +380,23 @@ FORCE_CEILING = ParamSpec(
     'for every guard: supervisor, stage driver and load-cell monitor',
     (0.5, 100.0))                           # under the load cell's 111 N capacity
 FORCE_CEILING_NAME = FORCE_CEILING.name
+#: the one travel limit of a pull (mantis_rig.trial.safety_limits): the supervisor's parameter,
+#: and the same parameter on stage_node, whose every pull the controller ends there
+TRAVEL = ParamSpec(
+    'travel_mm', 8.0, 'mm', 'a pull goes at most this far from where it starts: the supervisor '
+    'aborts there, and the stage controller itself is told to stop there (every pull is '
+    'executed as a move to its start + travel_mm)', (0.1, MAX_TRAVEL_MM))
+TRAVEL_NAME = TRAVEL.name
+#: the stage's diagnostics: how long since the supervisor's last heartbeat, and the longest
+#: gap between two heard since the node was activated (s, steady clock)
+HEARTBEAT_AGE_KEY = 'supervisor_heartbeat_age_s'
+HEARTBEAT_MAX_GAP_KEY = 'supervisor_heartbeat_max_gap_s'
+#: ... and the longest between two heartbeats' stamps (the supervisor's own pauses)
+HEARTBEAT_MAX_SEND_GAP_KEY = 'supervisor_heartbeat_max_send_gap_s'
 
 DEVICE_COMMON_PARAMETERS = (
     ParamSpec('backend', 'sim', '', 'device backend: sim or hardware', choices=BACKENDS,
-              at_configure=True, check=_check_backend),
+              at_configure=True, check=check_backend),
     ParamSpec('scene', DEFAULT_SCENE, '', 'sim: scene whose sensor models the simulated '
               f'device uses (the same scene as {SIM_WORLD_NODE})', at_configure=True,
               check=_check_scene),
@@ -388,6 +427,11 @@ STAGE_PARAMETERS = (
     ParamSpec('joint_state_rate_hz', 100.0, 'Hz', f'{JOINT_STATE} rate (read at activate)',
               (1.0, 1000.0)),
     _guard('the stage driver\'s guard'),
+    ParamSpec(TRAVEL.name, TRAVEL.default, TRAVEL.unit, f'the stage controller\'s bound: '
+              f'{TRAVEL.doc}', TRAVEL.range),
+    ParamSpec('supervisor_heartbeat_timeout_s', 0.4, 's', f'a motion commanded while the '
+              f'supervisor\'s {HEARTBEAT} is heard (a pull, a move) is stopped once that lapses '
+              f'this long (steady clock; checked every 50 ms)', (0.1, 0.45)),
     ParamSpec('max_force_age_s', 0.5, 's', 'a pull needs a force reading at most this old; a '
               'pull whose readings stop is stopped', (0.05, 10.0), at_configure=True),
 )
@@ -453,8 +497,7 @@ SUPERVISOR_PARAMETERS = (
     ParamSpec('d_t_mm', 23.0, 'mm', 'tendon guide distance from the body pivot', (1.0, 100.0)),
     ParamSpec('contact_angle_deg', 3.0, 'deg', 'contact angle (shim)', (-45.0, 45.0)),
     FORCE_CEILING,
-    ParamSpec('travel_mm', 8.0, 'mm', 'abort when the pull has gone this far',
-              (0.1, MAX_TRAVEL_MM)),
+    TRAVEL,
     ParamSpec('operator_note', '', '', 'free text stored with the trial'),
     ParamSpec('scene', '', '', 'simulated scene (sim backend) or rig description'),
     ParamSpec('backend', 'sim', '', 'device backend the stack runs with', choices=BACKENDS),
@@ -486,7 +529,7 @@ SUPERVISOR_PARAMETERS = (
               'stage is)', (-1.0, 25.0)),
 )
 CONDITION_KEYS = ('pull_speed_mm_s', 'medium', 'd_t_mm', 'contact_angle_deg', FORCE_CEILING.name,
-                  'travel_mm', 'operator_note', 'scene', 'backend')
+                  TRAVEL.name, 'operator_note', 'scene', 'backend')
 #: the supervisor sets these on camera_node before each arm
 CAMERA_WINDOW_PARAMETERS = ('frame_rate_hz', 'pre_trigger_s', 'post_trigger_s')
 

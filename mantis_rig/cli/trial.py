@@ -180,6 +180,7 @@ def _trial(config, args, signals) -> int:
     from ..nodes.bringup import Stack, StackError
     from ..nodes.stopping import StopRequested, say
     from ..nodes.trial_client import TrialClient
+    from ..nodes.watchdog import ProcessFault
     from ..recording.trial_summary import format_summary, summarize
 
     relay = _live_relay(args)
@@ -195,6 +196,8 @@ def _trial(config, args, signals) -> int:
         run.follow(client, stack, args.timeout, stopping=lambda: signals.first is not None)
     except StopRequested as stop:
         run.reason = stop.reason
+    except ProcessFault as fault:     # a node process ended, froze or hung: stop the stage
+        run.error, run.stage = fault, stack.fail_safe(fault)
     except StackError as exc:
         run.error = exc
         if run.started:
@@ -204,6 +207,8 @@ def _trial(config, args, signals) -> int:
         signals.shield()
         if run.bag is None and config.processes == 'single' and stack.nodes:
             run.bag = _supervisor_bag(stack)
+        # a process fault: stop() gives its line to the supervisor, which aborts the trial
+        # with it and closes the log
         stack.stop(reason=run.reason or 'trial ended', signum=_signum(signals))
         client.destroy_node()
         if relay is not None:
@@ -212,6 +217,8 @@ def _trial(config, args, signals) -> int:
         where = f'log closed: {run.bag}' if run.bag else 'no trial had started'
         say(f'mantis trial: {signals.first.reason}: stage stopped; {where}')
         return signals.first.exit_status
+    if isinstance(run.error, ProcessFault):
+        raise StackError(fault_line(run.error, run.stage, [run.bag] if run.bag else []))
     if run.error is not None:
         raise run.error       # stage stopped, log closed: cli.main says it in one line, exit 3
     print(format_summary(summarize(run.bag), with_path=False))
@@ -237,11 +244,13 @@ class _TrialRun:
         self.bag: Path | None = None
         self.final: str | None = None
         self.error: Exception | None = None      # the StackError that ended the trial
+        self.stage = ''          # how the stage was stopped after a node process's fault
         self.reason = ''
 
     def follow(self, client, stack, timeout_s: float, stopping=lambda: False) -> None:
         from ..nodes.bringup import StackError
         from ..nodes.supervisor_node import LOG_WRITE_FAILED
+        from ..nodes.watchdog import WATCH_PERIOD_S
 
         def log_failed() -> bool:
             return client.reason.startswith(LOG_WRITE_FAILED)
@@ -253,7 +262,8 @@ class _TrialRun:
             raise StackError(f'the supervisor refused to start: {message}')
         self.bag = Path(message.rsplit('logging to ', 1)[-1])
         print(f'bag: {self.bag}', flush=True)
-        self.final = client.wait_for_end(timeout_s, alive=stack.check_processes)
+        self.final = client.wait_for_end(timeout_s, alive=stack.check_processes,
+                                         check_every_s=WATCH_PERIOD_S)
         if self.final not in (None, 'done') and not stopping():
             _name_a_dying_process(stack, lambda: client.reason)
         if self.final is None:
@@ -322,10 +332,12 @@ def _wait_closed(bag: Path, timeout_s: float, failed=lambda: False) -> bool:
 def _bringup(config, args, signals) -> int:
     from ..nodes.bringup import Stack, StackError
     from ..nodes.stopping import StopRequested, say
+    from ..nodes.watchdog import WATCH_PERIOD_S, ProcessFault
 
     relay = _live_relay(args)
     stack = Stack(config, log_dir=args.log_dir)
     signals.emergency_stop = stack.emergency_stop
+    fault, stage, started = None, '', time.time()
     try:
         stack.start()
         if relay is not None and stack.rig is not None:
@@ -336,22 +348,62 @@ def _bringup(config, args, signals) -> int:
               f'{"es" if config.processes == "multi" else ""}); call {start}; '
               f'Ctrl-C to stop', flush=True)
         while True:
-            dead = stack.dead_processes()
-            if dead:        # the stack is stopped below; cli.main says it in one line, exit 3
-                raise StackError(f'node process(es) ended: {dead}')
-            time.sleep(0.5)
+            stack.check_processes()     # ProcessFault: a node process ended, froze or hung
+            time.sleep(WATCH_PERIOD_S)
     except StopRequested:
         pass
+    except ProcessFault as found:       # stop the stage first, kill a frozen process
+        fault, stage = found, stack.fail_safe(found)
     finally:
         signals.shield()
         reason = signals.first.reason if signals.first else 'a node process ended'
+        # a process fault: stop() gives its line to the supervisor, which aborts a trial in
+        # flight with it and closes the log
         stack.stop(reason=reason, signum=_signum(signals))
         if relay is not None:
             relay.close()
     if signals.first is not None:
         say(f'mantis bringup: {signals.first.reason}: stage stopped, nodes ended')
         return signals.first.exit_status
+    if fault is not None:       # cli.main says it in one line, exit 3
+        raise StackError(fault_line(fault, stage, _bags_since(config.supervisor.get('out'),
+                                                              started)))
     return 0
+
+
+def fault_line(fault, stage: str, bags) -> str:
+    """The one line of a node process's fault: the process and how it ended, froze or hung,
+    the stage stopped and the nodes ended, and what became of the trial in flight's bag (the
+    last of ``bags``, the trials of this bring-up): closed with the fault as its abort reason,
+    or not closed (its recorder, the supervisor, was killed) and recoverable."""
+    line = f'{fault.line}; {stage or "stage stopped"}, nodes ended'
+    bag = bags[-1] if bags else None
+    if bag is None:
+        return line
+    if not (bag / 'metadata.yaml').exists():
+        return (f'{line}; the trial\'s bag {bag} was not closed (its recorder went with '
+                f'{fault.name}): recover it with `mantis recover {bag}`')
+    outcome = _outcome(bag)
+    if outcome.get('result') == 'aborted' and outcome.get('reason') == fault.line:
+        return f'{line}; the trial in flight aborted with this reason in its bag {bag}'
+    return line
+
+
+def _outcome(bag: Path) -> dict:
+    try:
+        from ..recording import BagReader
+        return BagReader(bag).metadata('trial_outcome') or {}
+    except Exception:        # noqa: BLE001 - the line goes out without it
+        return {}
+
+
+def _bags_since(out, since: float) -> list:
+    """The trials' bag directories under ``out`` made since ``since`` (wall time), oldest
+    first."""
+    if not out or not Path(out).is_dir():
+        return []
+    bags = [p for p in Path(out).glob('trial_*') if p.is_dir() and p.stat().st_mtime >= since]
+    return sorted(bags, key=lambda p: p.stat().st_mtime)
 
 
 __all__ = ['add_commands', 'stack_config']

@@ -112,6 +112,15 @@ class StageLimits:
                 f'stage position {position_m * 1e3:.4f} mm is outside the soft travel limits '
                 f'[{self.min_position_m * 1e3:.3f}, {self.max_position_m * 1e3:.3f}] mm')
 
+    def check_bound(self, velocity_m_per_s: float, here_m: float, bound_m: float) -> None:
+        """Refuse a bound for a move at velocity_m_per_s from here_m that is not ahead of the
+        stage in the direction of travel, or not inside the soft limits."""
+        self.check_position(bound_m)
+        if (bound_m - here_m) * velocity_m_per_s <= 0:
+            raise ConfigurationError(
+                f'bound {bound_m * 1e3:.4f} mm of a move at {velocity_m_per_s * 1e3:+.4f} mm/s '
+                f'is not ahead of the stage at {here_m * 1e3:.4f} mm')
+
     def check_speed(self, speed_m_per_s: float) -> None:
         if not (0.0 <= abs(speed_m_per_s) <= self.max_speed_m_per_s):
             raise ConfigurationError(
@@ -136,8 +145,14 @@ class Stage(Device):
         """Move to an absolute position at the given speed and block until it is reached."""
 
     @abc.abstractmethod
-    def move_at(self, velocity_m_per_s: float) -> None:
-        """Start moving at a constant velocity (sign gives direction); returns at once."""
+    def move_at(self, velocity_m_per_s: float, bound_m: Optional[float] = None) -> None:
+        """Start moving at a constant velocity (sign gives direction); returns at once.
+
+        With ``bound_m`` (a position ahead in the direction of travel, inside the soft limits)
+        the move is a bounded one: the controller itself is told to stop there, as an absolute
+        move at this speed that ends at rest on ``bound_m``, so that the stage stops there
+        even if nothing commands it again (its driver's process dead). Without, the stage
+        moves until stopped or until the driver's soft-limit check stops it."""
 
     @abc.abstractmethod
     def stop(self) -> None:
@@ -522,15 +537,15 @@ class StageGuard(Stage):
             raise
         self._after_pull(trips, keep_active=False)
 
-    def move_at(self, velocity_m_per_s: float) -> None:
+    def move_at(self, velocity_m_per_s: float, bound_m: Optional[float] = None) -> None:
         self.limits.check_speed(velocity_m_per_s)
         if velocity_m_per_s * self.pull_direction <= 0:
             self._end_pull()
-            self.stage.move_at(velocity_m_per_s)
+            self.stage.move_at(velocity_m_per_s, bound_m)
             return
         trips = self._admit_pull(f'velocity move at {velocity_m_per_s * 1e3:+.4f} mm/s')
         try:
-            self.stage.move_at(velocity_m_per_s)
+            self.stage.move_at(velocity_m_per_s, bound_m)
         except BaseException:
             self._after_pull(trips, keep_active=False)
             raise

@@ -9,6 +9,10 @@ KDC101s do not) is polled instead: the I/O thread sends MOT_REQ_DCSTATUSUPDATE a
 ends the link. Commands are written from the caller's thread and wait, with a timeout,
 for the reply the I/O thread records. Any broken link (timeout, garbled or truncated bytes,
 vanished port) ends in a DeviceError, a closed port and a stopped I/O thread.
+
+A bounded velocity move (move_at(v, bound_m): a pull) is sent as MOT_MOVE_ABSOLUTE to the
+bound at |v| (MOT_SET_VELPARAMS' maximum velocity): the controller itself ends it at rest there,
+whatever becomes of this process (docs/hardware_kdc101.md).
 """
 from __future__ import annotations
 
@@ -74,7 +78,8 @@ class StageAxis:
 
 @dataclass(frozen=True)
 class _Motion:
-    kind: str          # 'home', 'absolute' or 'velocity'
+    kind: str          # 'home', 'absolute', 'velocity' or 'bounded' (a velocity move that
+    #                    the controller ends at its bound: MOT_MOVE_ABSOLUTE, not waited for)
     direction: int     # +1 forward (position increases), -1 reverse, 0 none
     description: str
 
@@ -340,7 +345,12 @@ class Kdc101Stage(Stage):
             raise DeviceError(f'{what} ended early: the stage stopped at '
                               f'{self.scale.counts_to_position_m(msg.position) * 1e3:.4f} mm')
 
-    def move_at(self, velocity_m_per_s: float) -> None:
+    def move_at(self, velocity_m_per_s: float, bound_m: Optional[float] = None) -> None:
+        """A velocity move (MOT_MOVE_VELOCITY), or with ``bound_m`` a bounded one: the
+        controller is sent the speed as its maximum velocity (MOT_SET_VELPARAMS, with the
+        limits' acceleration) and MOT_MOVE_ABSOLUTE to the bound, so that it stops there by
+        itself, at rest, whatever becomes of this process. Returns at once either way; the
+        bounded move's MOT_MOVE_COMPLETED is not waited for."""
         self.limits.check_speed(velocity_m_per_s)
         if velocity_m_per_s == 0.0:
             self.stop()
@@ -355,11 +365,19 @@ class Kdc101Stage(Stage):
                 f'cannot move {"forward" if direction > 0 else "in reverse"}: the stage is at '
                 f'{position_m * 1e3:.4f} mm, at or beyond the soft travel limit '
                 f'{limit_m * 1e3:.3f} mm')
+        if bound_m is not None:
+            self.limits.check_bound(velocity_m_per_s, position_m, bound_m)
         self._set_velocity(abs(velocity_m_per_s))
-        self._begin_motion(_Motion('velocity', direction,
-                                   f'velocity move at {velocity_m_per_s * 1e3:+.4f} mm/s'))
-        self._send(apt.mot_move_velocity(CONTROLLER, HOST, CHANNEL,
-                                         FORWARD if direction > 0 else REVERSE))
+        what = f'velocity move at {velocity_m_per_s * 1e3:+.4f} mm/s'
+        if bound_m is None:
+            self._begin_motion(_Motion('velocity', direction, what))
+            self._send(apt.mot_move_velocity(CONTROLLER, HOST, CHANNEL,
+                                             FORWARD if direction > 0 else REVERSE))
+            return
+        self._begin_motion(_Motion('bounded', direction,
+                                   f'{what} bounded at {bound_m * 1e3:.4f} mm'))
+        self._send(apt.mot_move_absolute(CONTROLLER, HOST, CHANNEL,
+                                         self.scale.position_to_counts(bound_m)))
 
     def stop(self) -> None:
         with self._cond:

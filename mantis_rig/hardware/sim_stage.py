@@ -3,9 +3,10 @@
 The soft travel limits and the speed ceiling are enforced here as in the real driver: speeds
 above the ceiling and targets outside the limits are refused, and a velocity move is stopped
 by a watchdog thread before it leaves the soft limits. A stop is immediate (the controller's
-abort). Moves to a position are executed by the world, as the controller executes them: they
-end at rest on the target. Positions are the world's stage positions; the stage starts homed at
-drive.start_position_mm, as after the session's homing.
+abort). Moves to a position, and bounded velocity moves (a pull: ``move_at(v, bound_m)``), are
+executed by the world, as the controller executes them: they end at rest on the target (the
+bound), with nothing else commanding the stage. Positions are the world's stage positions; the
+stage starts homed at drive.start_position_mm, as after the session's homing.
 """
 from __future__ import annotations
 
@@ -74,7 +75,10 @@ class SimStage(Stage):
         self._require_homed('move_to')
         self._drive_until(position_m, abs(speed_m_per_s), timeout_s)
 
-    def move_at(self, velocity_m_per_s: float) -> None:
+    def move_at(self, velocity_m_per_s: float, bound_m: float | None = None) -> None:
+        """A velocity move, or with ``bound_m`` a bounded one that the world executes as the
+        controller does: a move to the bound at this speed, ending at rest on it, whatever
+        this stage (or the process that commands it) does after. Returns at once."""
         self._require_open('move_at')
         self.limits.check_speed(velocity_m_per_s)
         if velocity_m_per_s == 0.0:
@@ -88,8 +92,16 @@ class SimStage(Stage):
                 f'cannot move {"forward" if velocity_m_per_s > 0 else "in reverse"}: the stage '
                 f'is at {position * 1e3:.4f} mm, at or beyond the soft travel limit '
                 f'{limit * 1e3:.3f} mm')
-        self._command(velocity_m_per_s)
-        self._start_watchdog(velocity_m_per_s)
+        if bound_m is None:
+            self._command(velocity_m_per_s)
+            self._start_watchdog(velocity_m_per_s)
+            return
+        self.limits.check_bound(velocity_m_per_s, position, bound_m)
+        self._watchdog_done.set()          # inside the soft limits: no watchdog needed
+        self._limit_hit = (False, False)
+        with self._lock:
+            self._velocity_cmd = velocity_m_per_s
+            self.port.move_stage_to(bound_m, abs(velocity_m_per_s))
 
     def stop(self) -> None:
         self._stop_watch.set()

@@ -14,7 +14,13 @@
   the real rig, the supervisor on ``use_sim_time`` in sim mode. They inherit this process's
   environment, hence its ROS domain, each in a process group of its own. stop() signals them
   (the supervisor first, so that it aborts a trial and closes its log; SIGKILL for any still
-  running after 2.5 s).
+  running after 2.5 s, the supervisor after SUPERVISOR_GRACE_S). The reason given to stop()
+  reaches the node processes (a file named in STOP_REASON_ENV), so that the supervisor aborts
+  its trial with it rather than with the signal's name.
+
+A node process that ends, freezes or hangs is found by ``check_processes()`` (a
+mantis_rig.nodes.watchdog.ProcessWatch: the process's exit, its /proc state, its nodes'
+/diagnostics) and ``fail_safe()`` stops the stage, kills a frozen process and ends the stack.
 
 The device nodes come up unconfigured; the supervisor configures and activates them.
 """
@@ -33,12 +39,16 @@ from rclpy.parameter import Parameter
 import yaml
 
 from mantis_rig.contract import CLOCK, FORCE_CEILING_NAME, FORCE_GUARD_NODES, resolve
-from mantis_rig.errors import StackError
+from mantis_rig.errors import StackError  # noqa: F401 - the stack's error, imported from here
 
 from .executors import STACK_PARENT_ENV, Spinner, light_executor, threaded_executor
 from .memory import limit_malloc_arenas
 from .node_table import DEVICES, SIM_RIG_PROCESS, STAGE_NODE, SUPERVISOR, WORLD
 from .sim_rig import DEVICE_THREADS, SimRig, release
+from .stopping import STOP_REASON_ENV
+from .watchdog import ProcessFault, ProcessWatch, stage_port, stop_stage_at_port
+
+SUPERVISOR_GRACE_S = 8.0    # its trial's abort: the stage's stop confirmed (2 s), the log closed
 
 
 @dataclass
@@ -113,6 +123,13 @@ class StackConfig:
     def stage_process(self) -> str:
         return SIM_RIG_PROCESS if self.sim else STAGE_NODE
 
+    def nodes_of_processes(self) -> dict:
+        """process name -> the names of the nodes it holds (multi-process layout)."""
+        if self.sim:
+            return {SIM_RIG_PROCESS: [WORLD.name, *(entry.name for entry in DEVICES)],
+                    SUPERVISOR.name: [SUPERVISOR.name]}
+        return {name: [name] for name in self.process_names()}
+
 
 def _overrides(values: dict) -> list:
     return [Parameter(k, value=v) for k, v in values.items()]
@@ -132,6 +149,9 @@ class Stack:
         self.device_executor = threaded_executor(DEVICE_THREADS)
         self._spinners: list[Spinner] = []
         self._params_file: Path | None = None
+        self.watch: ProcessWatch | None = None
+        self._watch_node = None
+        self.fault: ProcessFault | None = None     # what fail_safe() handled
 
     # ------------------------------------------------------------------ start
     def start(self) -> Stack:
@@ -188,13 +208,37 @@ class Stack:
         with os.fdopen(handle, 'w') as f:
             yaml.safe_dump(params, f)
         self._params_file = Path(path)
+        self._reason_file.unlink(missing_ok=True)
+        env = {**os.environ, STACK_PARENT_ENV: str(os.getpid()),
+               STOP_REASON_ENV: str(self._reason_file)}
         for name in self.config.process_names():
             # Each node in a process group of its own: a terminal's Ctrl-C reaches only this
             # process, which stops the nodes in order (stop()); a node whose parent is gone
             # stops itself (executors.run_node).
             self.processes[name] = subprocess.Popen(
                 self.command(name), stdout=self._log(name), stderr=subprocess.STDOUT,
-                env={**os.environ, STACK_PARENT_ENV: str(os.getpid())}, process_group=0)
+                env=env, process_group=0)
+        self._start_watch()
+
+    @property
+    def _reason_file(self) -> Path:
+        return self._params_file.with_suffix('.reason')
+
+    def _start_watch(self) -> None:
+        """A ProcessWatch over the node processes, fed by a /diagnostics subscription of a
+        node of this process."""
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        from mantis_rig.contract import DIAGNOSTICS
+
+        from .lean_node import LeanNode
+        self.watch = ProcessWatch(self.processes, self.config.nodes_of_processes())
+        self._watch_node = LeanNode('mantis_stack_watch', namespace=self.config.node_namespace
+                                    or '/', start_parameter_services=False)
+        self._watch_node.create_subscription(DiagnosticArray, DIAGNOSTICS.name,
+                                             self.watch.on_diagnostics,
+                                             DIAGNOSTICS.qos.subscriber())
+        self.executor.add_node(self._watch_node)
 
     def command(self, name: str) -> list:
         return [sys.executable, '-m', f'mantis_rig.nodes.{name}', '--ros-args',
@@ -207,11 +251,40 @@ class Stack:
         return open(self.log_dir / f'{name}.log', 'wb')
 
     def check_processes(self) -> None:
-        """Raise StackError naming every node process that has ended, with its last output."""
-        dead = self.dead_processes()
-        if dead:
-            raise StackError('node process(es) ended: ' + '; '.join(
-                f'{name} (exit {code}){self._log_tail(name)}' for name, code in dead.items()))
+        """Raise ProcessFault (a StackError) for a node process that has ended, froze or hung
+        (mantis_rig.nodes.watchdog), its last output with it; nothing is done about it here
+        (fail_safe does that)."""
+        if self.watch is None:
+            return
+        fault = self.watch.check()
+        if fault is not None:
+            code = self.processes[fault.name].returncode
+            if fault.ended and code is not None and 0 <= code <= 128:
+                # exited by itself (a crash, bad parameters): its last words say why
+                fault.detail = self._log_tail(fault.name).removeprefix(': ')
+                fault.args = (fault.line,)
+            raise fault
+
+    def fail_safe(self, fault: ProcessFault) -> str:
+        """A node process ended, froze or hung: stop the stage first, by the route that is left
+        (its node process stops it on the stack's stop signal; a KDC101 whose process is gone
+        is stopped at its serial port), kill a frozen or hung process, and note the fault
+        (``self.fault``) for stop(), which then ends the stack with the fault's line as the
+        trial's abort reason. Returns what was done, in words for the line."""
+        self.fault = fault
+        process = self.processes.get(fault.name)
+        if not fault.ended and process is not None and process.poll() is None:
+            process.kill()           # a frozen process takes SIGKILL only
+            try:
+                process.wait(timeout=5.0)
+            except subprocess.TimeoutExpired:
+                pass
+        if fault.name == self.config.stage_process and not self.config.sim:
+            port = stage_port(self.config.node_parameters()[STAGE_NODE])
+            if port is None:
+                return 'the stage\'s port could not be found to stop it'
+            return stop_stage_at_port(port)
+        return ''
 
     def _log_tail(self, name: str) -> str:
         path = self.log_dir / f'{name}.log' if self.log_dir else None
@@ -234,12 +307,21 @@ class Stack:
         for node in self.nodes:
             if node.get_name() == SUPERVISOR.name:
                 node.shutdown_trial(reason)
+        if self.processes and self._params_file is not None:
+            # the reason the node processes stop for (run_node reads it on the signal)
+            try:
+                self._reason_file.write_text(self.fault.line if self.fault else reason)
+            except OSError:
+                pass
         supervisor = self.processes.get(SUPERVISOR.name)
         if supervisor is not None:            # first: it aborts a trial and closes its log
-            _end_processes([supervisor], signum)
+            _end_processes([supervisor], signum, SUPERVISOR_GRACE_S)
         _end_processes(self.processes.values(), signum)
         for spinner in self._spinners:
             spinner.stop()
+        if self._watch_node is not None:
+            self._watch_node.destroy_node()
+            self._watch_node = None
         for node in reversed(self.nodes):
             release(node)
             node.destroy_node()
@@ -249,6 +331,7 @@ class Stack:
         self.nodes = []
         if self._params_file is not None:
             self._params_file.unlink(missing_ok=True)
+            self._reason_file.unlink(missing_ok=True)
 
     def emergency_stop(self) -> None:
         """Stop the stage by the quickest route, from a signal handler: the stage node's

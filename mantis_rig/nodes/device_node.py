@@ -41,10 +41,10 @@ from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.parameter import Parameter
 
 from mantis_rig import contract
-from mantis_rig.contract import DEVICE_COMMON_PARAMETERS, ParamSpec
-from mantis_rig.errors import ConfigurationError, InputError
-from mantis_rig.hardware.backends import check_backend
+from mantis_rig.contract import DEVICE_COMMON_PARAMETERS, ParamSpec, check_backend
+from mantis_rig.errors import ConfigurationError
 from mantis_rig.hardware.interfaces import DeviceError
+from mantis_sim.errors import InputError
 
 from .lean_node import WithoutDefaultEventHandlers
 

@@ -29,12 +29,19 @@ from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
 from mantis_rig.contract import side_node_name
-from mantis_rig.errors import USAGE_ERROR, ConfigurationError, InputError
+from mantis_rig.errors import USAGE_ERROR, ConfigurationError
 from mantis_rig.nodes.ros_env import claim_local_domain
+from mantis_sim.errors import InputError
 
 from .lean_node import LeanNode
 from .memory import limit_malloc_arenas
-from .stopping import PROCESS_STOPPING, StopRequested, StopSignals, watch_parent
+from .stopping import (
+    PROCESS_STOPPING,
+    StopRequested,
+    StopSignals,
+    stop_reason,
+    watch_parent,
+)
 
 NODE_THREADS = 4        # a device node process: its blocking services and backend waits
 
@@ -140,7 +147,8 @@ def run_node(node_class, args=None, make_executor=None) -> int:
     shut the context down first: the node still stops its device (a node's `emergency_stop`)
     and the supervisor aborts its trial and closes its log (`shutdown_trial`) before the
     context goes; the exit status is then 130 or 143. A node process of a stack also stops when
-    the stack's process is gone."""
+    the stack's process is gone or frozen; the supervisor then aborts its trial with the reason
+    the stack stops for, when it gave one (stopping.stop_reason: the node process that died)."""
     claim_local_domain()
     limit_malloc_arenas()          # before the node's threads: a long bring-up stays flat
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
@@ -167,7 +175,11 @@ def run_node(node_class, args=None, make_executor=None) -> int:
     except StopRequested as stop:
         status = stop.exit_status
         _call(node, 'emergency_stop', f'{PROCESS_STOPPING}: {stop.reason}')
-        _call(node, 'shutdown_trial', stop.reason)
+        # no return of the stage after this abort, nor after one under way (the stack is
+        # shutting down: a return would wait for a stage that may be gone)
+        _call(getattr(node, 'sequence', None), 'stop_where_it_is')
+        # the stack's reason when it gave one (a node process that ended, froze or hung)
+        _call(node, 'shutdown_trial', stop_reason(stop.reason))
     except ExternalShutdownException:
         pass
     finally:

@@ -4,13 +4,18 @@ Like ``ros2 bag record``: no deserialization, each message logged with the node'
 reception (sim time under ``use_sim_time``). The subscriptions ask for what each publisher of
 the contract offers (docs/ros_interfaces.md): reliable everywhere, transient local for
 ``/supervisor/state`` (so the state current at the start is recorded too).
+
+Each trial state is synced to disk as soon as it is written (BagWriter.sync): a recorder killed
+or frozen mid-trial (its process, the supervisor's) leaves a bag that `mantis recover` reads up
+to the state the trial was in, however soon after its start that came, and the data up to the
+writer's own last sync (at most its sync period, 0.5 s, before the end).
 """
 from __future__ import annotations
 
 import threading
 
 from mantis_rig import contract
-from mantis_rig.recording import BagClosedError
+from mantis_rig.recording import BagClosedError, BagWriteError
 from mantis_rig.recording.interfaces import message_class
 
 #: Every topic of the contract that a trial's bag holds (mantis_rig.contract).
@@ -78,6 +83,11 @@ class Recorder:
             return
         with self._lock:
             self.counts[name] += 1
+        if name == contract.SUPERVISOR_STATE.name:
+            try:
+                bag.sync()          # a trial's state on disk at once (a killed recorder)
+            except (BagClosedError, BagWriteError):   # the bag's on_failure says so
+                pass
         if self.on_written is not None:
             self.on_written(name, data)
 

@@ -12,6 +12,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from typing import Optional
 
 SIGNAL_NAMES = {signal.SIGINT: 'SIGINT (Ctrl-C)', signal.SIGTERM: 'SIGTERM'}
@@ -19,6 +20,27 @@ SIGNAL_NAMES = {signal.SIGINT: 'SIGINT (Ctrl-C)', signal.SIGTERM: 'SIGTERM'}
 # short: the supervisor's abort reason then shows the process is on its way out.
 PROCESS_STOPPING = 'stage stopped by its own process'
 PARENT_CHECK_S = 0.5
+# A stack's process stopped (frozen: SIGSTOP) this long is taken for gone: its node processes
+# stop themselves, since nothing would find a node of theirs that died or hung meanwhile.
+PARENT_FROZEN_S = 2.0
+# Set by a stack for its node processes: a file that holds the reason the stack stops them for
+# (a node process that ended, froze or hung: the supervisor aborts its trial with it).
+STOP_REASON_ENV = 'MANTIS_STACK_STOP_REASON'
+_parent_gone: list = []        # why watch_parent stopped this process, once it has
+
+
+def stop_reason(signal_reason: str) -> str:
+    """Why this node process is stopping: the stack's reason when it gave one (its file), what
+    watch_parent found, or the signal's own (``signal_reason``)."""
+    path = os.environ.get(STOP_REASON_ENV)
+    if path:
+        try:
+            text = open(path, encoding='utf-8').read().strip()
+        except OSError:
+            text = ''
+        if text:
+            return text
+    return _parent_gone[0] if _parent_gone else signal_reason
 
 
 class StopRequested(BaseException):
@@ -105,10 +127,22 @@ def say(line: str) -> None:
 
 def watch_parent(parent_pid: int) -> threading.Thread:
     """SIGTERM this process when its parent is gone (a node process of a stack whose parent was
-    killed outright must not go on driving a device)."""
+    killed outright must not go on driving a device), or frozen (stopped, e.g. by SIGSTOP) for
+    PARENT_FROZEN_S: nothing would then find a node process that died or hung."""
     def watch() -> None:
+        stopped_since = None
         while os.getppid() == parent_pid:
             threading.Event().wait(PARENT_CHECK_S)
+            if state_of(parent_pid) == 'T':
+                stopped_since = stopped_since or time.monotonic()
+                if time.monotonic() - stopped_since >= PARENT_FROZEN_S:
+                    _parent_gone.append(f'the stack\'s process (pid {parent_pid}) froze '
+                                        f'(stopped by SIGSTOP or another stop signal)')
+                    break
+            else:
+                stopped_since = None
+        else:
+            _parent_gone.append(f'the stack\'s process (pid {parent_pid}) ended')
         os.kill(os.getpid(), signal.SIGTERM)
 
     thread = threading.Thread(target=watch, name='parent-watch', daemon=True)
@@ -116,4 +150,13 @@ def watch_parent(parent_pid: int) -> threading.Thread:
     return thread
 
 
-__all__ = ['StopRequested', 'StopSignals', 'say', 'watch_parent']
+def state_of(pid: int) -> str | None:
+    """Process ``pid``'s one-letter state in /proc (``T``: stopped), None if it is gone."""
+    try:
+        with open(f'/proc/{pid}/stat', encoding='ascii', errors='replace') as f:
+            return f.read().rsplit(')', 1)[1].split()[0]
+    except (OSError, IndexError):
+        return None
+
+
+__all__ = ['StopRequested', 'StopSignals', 'say', 'stop_reason', 'watch_parent']

@@ -10,13 +10,18 @@ A second abort while an aborted trial returns the stage stops it where it is. Th
 conditions and procedure settings are parameters (mantis_rig.trial.conditions); they are
 fixed while a trial runs. Each trial is logged to its own bag directory under ``out``; the
 start_trial response names it. The sequence itself is mantis_rig.trial.sequence.
+While the node lives it publishes its heartbeat (``/supervisor/heartbeat``, std_msgs/Header,
+every 50 ms of steady time, from a thread of its own): stage_node stops a pull or move the
+supervisor commanded when it lapses (docs/architecture.md, Stopping).
 """
 from __future__ import annotations
 
 from datetime import datetime
+import os
 from pathlib import Path
 import sys
 import threading
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from lifecycle_msgs.msg import State, TransitionEvent
@@ -26,7 +31,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState, TimeReference
-from std_msgs.msg import Float64MultiArray, String
+from std_msgs.msg import Float64MultiArray, Header, String
 from std_srvs.srv import Trigger
 
 from mantis_rig import contract
@@ -149,6 +154,15 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
         self.create_timer(1.0, self._publish_diagnostics,
                           clock=Clock(clock_type=ClockType.STEADY_TIME), **group)
         self._publish_state('idle', '')
+        # The heartbeat stage_node needs to keep a pull going (contract.HEARTBEAT): from a
+        # thread of its own on the steady clock, so that neither simulated time (which stops
+        # with the world) nor a busy executor holds it back; only a frozen process does.
+        self._heartbeat_pub = self.create_publisher(Header, c.HEARTBEAT.name,
+                                                    c.HEARTBEAT.qos.publisher())
+        self._heartbeat_stop = threading.Event()
+        self._heartbeat = threading.Thread(target=self._beat, name='supervisor-heartbeat',
+                                           daemon=True)
+        self._heartbeat.start()
 
     # ------------------------------------------------------------------ parameters
     def _declare_parameters(self) -> None:
@@ -409,8 +423,25 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
                 and self.sequence is not None:
             self.sequence.on_device_fault(device, left_active(msg.goal_state.label))
 
+    def _beat(self) -> None:
+        """Publish the heartbeat every HEARTBEAT_PERIOD_S of steady time until destroyed; a
+        beat that is late is sent at once and the period starts afresh from it."""
+        period = contract.HEARTBEAT_PERIOD_S
+        due = time.monotonic()
+        while not self._heartbeat_stop.wait(max(0.0, due - time.monotonic())):
+            now = time.monotonic()
+            due = due + period if due + period > now else now + period
+            # stamped on the steady clock; named with this process (contract.heartbeat_source)
+            beat = Header(frame_id=contract.heartbeat_source(self.get_name(), os.getpid()))
+            beat.stamp.sec, beat.stamp.nanosec = divmod(time.monotonic_ns(), 1_000_000_000)
+            if not self._publish(self._heartbeat_pub, beat):
+                return
+
     def destroy_node(self):
-        self.shutdown_trial()
+        self.shutdown_trial()         # the heartbeat goes on while the trial stops the stage
+        self._heartbeat_stop.set()
+        if self._heartbeat is not threading.current_thread():
+            self._heartbeat.join(timeout=1.0)
         self._recorder_node.close()
         super().destroy_node()
 

@@ -8,8 +8,11 @@ configuring -> [homing] -> [returning to the start] -> taking_up_slack -> [tarin
 pulling -> released -> stopping -> returning -> done, and ends in ``aborted`` instead when
 ``abort(reason)`` is called (abort service, force ceiling, travel limit, the stage stopped by a
 limit or refusing a move, device fault, timeout, failed call). An abort stops the stage at once,
-from the thread that detected it. On release the force callback stops the stage and fires the
-camera trigger itself, without waiting for the worker.
+from the thread that detected it. The trial's travel limit is also set on the stage, whose
+controller ends every pull there by itself (and stage_node stops a pull when this process's
+heartbeat lapses: mantis_rig.trial.safety_limits); a pull that reached its bound is a motion
+stop the stage reports, and ends the trial like the travel check here. On release the force
+callback stops the stage and fires the camera trigger itself, without waiting for the worker.
 
 Every trial starts from a known state (a lab runs many on one bring-up): the stage goes to the
 trial's start position (``start_position_mm``, or where the first trial of the bring-up
@@ -45,6 +48,8 @@ from mantis_rig.contract import (
 
 from .conditions import TrialConditions
 from .force_monitor import ForceMonitor
+from .loading_work import LoadingWork
+from .safety_limits import PULL_BOUND_NODES, TRAVEL_NAME
 
 STATES = ('idle', 'configuring', 'homing', 'taking_up_slack', 'taring', 'arming', 'pulling',
           'released', 'stopping', 'returning', 'done', 'aborted', 'waiting_for_relatch')
@@ -137,6 +142,7 @@ class TrialSequence:
         self._reset_devices = set(self.session.devices_in_error)
         self.close_log = close_log or (lambda outcome: None)
         self.monitor = ForceMonitor(conditions.force_ceiling_n, conditions.release_jump_n)
+        self.loading = LoadingWork()
         self.state = 'idle'
         self.reason = ''
         self.outcome: dict = {}
@@ -236,6 +242,7 @@ class TrialSequence:
                        and not self._released.is_set())
             if release:
                 self._released.set()
+                self.loading.stop()
         if hit is not None and self.running and self.conditions.supervisor_force_monitor:
             self.abort(f'force ceiling: {hit[1]:.2f} N > {self.conditions.force_ceiling_n} N '
                        f'at t = {hit[0]:.4f} s')
@@ -250,6 +257,7 @@ class TrialSequence:
                 or abs(position_m - previous) > 1e-6:
             self._last_motion = self.rig.now_s()
         self.stage_position_m, self.stage_velocity_m_per_s = position_m, velocity_m_per_s
+        self.loading.step(position_m, self.monitor.latest_n)
         self._stage_updates += 1
         start = self.pull_start_position_m
         if start is not None and self.state in ('taking_up_slack', 'pulling') \
@@ -329,10 +337,14 @@ class TrialSequence:
                            + self._device_hint(node))
             if label == 'active' and node in self._reset_devices:
                 steps = ('deactivate', 'activate')     # clears a latched trip or fault
-            if node in FORCE_GUARD_NODES:       # one ceiling for every guard
-                self._await(self.rig.set_parameters(
-                    node, {FORCE_CEILING_NAME: self.conditions.force_ceiling_n}),
-                    f'setting the force ceiling on {node}')
+            limits = {}                          # one value of each limit for every guard
+            if node in FORCE_GUARD_NODES:
+                limits[FORCE_CEILING_NAME] = self.conditions.force_ceiling_n
+            if node in PULL_BOUND_NODES:        # the controller ends each pull at its travel
+                limits[TRAVEL_NAME] = self.conditions.travel_mm
+            if limits:
+                self._await(self.rig.set_parameters(node, limits),
+                            f'setting the safety limits ({", ".join(limits)}) on {node}')
             for transition in steps:
                 self._transition(node, transition)
         for node in self._reset_devices:
@@ -490,6 +502,7 @@ class TrialSequence:
     def _pull(self) -> None:
         self.pull_start_position_m = self.stage_position_m
         with self._lock:
+            self.loading.start(self.stage_position_m)
             self.monitor.arm_release()
             self._set_state('pulling')
         self._start_moving(self.conditions.pull_speed_mm_s * 1e-3, 'the pull',
@@ -602,6 +615,8 @@ class TrialSequence:
                'peak_force_n': f'{m.peak_n:.4f}' if m.samples else '',
                'peak_force_time_s': f'{m.peak_t_s:.6f}' if m.samples else '',
                'release_time_s': '' if m.release_t_s is None else f'{m.release_t_s:.6f}',
+               'loading_work_mj': f'{self.loading.mj:.4f}'
+               if self.loading.started and m.release_t_s is not None else '',
                'camera_trigger_time_s': '' if self.trigger_time_s is None
                else f'{self.trigger_time_s:.6f}',
                'marker_frames': self.marker_frames,

@@ -8,6 +8,12 @@ MOT_ACK_USTATUSUPDATE for `ack_timeout_s`. Replies are built with struct per the
 thorlabs_apt_protocol only decodes controller-to-host messages, so host messages are
 decoded here with struct as well.
 
+Moves as the APT document describes them: MOT_MOVE_ABSOLUTE moves to its absolute position at
+the maximum velocity of the last MOT_SET_VELPARAMS (a constant speed here: the acceleration is
+not modelled) and ends at rest on it with MOT_MOVE_COMPLETED, whatever the host does meanwhile
+(it need not be there: a bounded pull ends at its bound with the driver's process dead);
+MOT_MOVE_VELOCITY moves until MOT_MOVE_STOP or a limit switch; MOT_MOVE_STOP stops at once.
+
 Some KDC101s do not stream status after HW_START_UPDATEMSGS and only answer
 MOT_REQ_USTATUSUPDATE: `streams_status=False` emulates them (`answers_status_requests=False`
 as well: a controller that gives status neither way).
@@ -146,6 +152,12 @@ class Kdc101Emulator:
     def moving(self) -> bool:
         with self._lock:
             return self._mode is not None
+
+    @property
+    def mode(self) -> Optional[str]:
+        """The move under way: 'home', 'absolute', 'velocity', or None at rest."""
+        with self._lock:
+            return self._mode
 
     @property
     def sending_status(self) -> bool:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import threading
 import time
 
@@ -20,7 +21,7 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState, TimeReference
-from std_msgs.msg import Float64, Float64MultiArray
+from std_msgs.msg import Float64, Float64MultiArray, Header
 from std_srvs.srv import Trigger
 
 from mantis_rig.contract import (
@@ -30,9 +31,13 @@ from mantis_rig.contract import (
     DIAGNOSTICS,
     FORCE_BLOCK,
     FORCE_CEILING_NAME,
+    HEARTBEAT,
+    HEARTBEAT_AGE_KEY,
+    HEARTBEAT_PERIOD_S,
     JOINT_STATE,
     LOADCELL_NODE,
     MARKERS,
+    MOTION_STOPS_KEY,
     SIM_WORLD_NODE,
     STAGE_HOME,
     STAGE_NODE,
@@ -344,6 +349,121 @@ def test_force_ceiling_stops_the_stage():
         assert sim_rig.world.last_strike, 'the ceiling tripped before the release'
         assert rig.state(STAGE_NODE) == 'active'
     finally:
+        rig.close()
+
+
+def test_a_pull_ends_at_its_bound_and_the_stage_says_so():
+    """stage_node executes a pull as a move to where it starts + travel_mm, which the world
+    ends at rest there with nobody stopping it: a motion stop on /diagnostics (the supervisor
+    ends its trial on it). Nobody commands a stop here."""
+    rig = Rig()
+    try:
+        sim_rig = rig.add_sim_rig({
+            SIM_WORLD_NODE: {'real_time_factor': 0.0},
+            STAGE_NODE: {'scene': SCENE, 'max_force_age_s': 5.0, 'travel_mm': 0.5},
+            LOADCELL_NODE: {'scene': SCENE}})
+        for name in (STAGE_NODE, LOADCELL_NODE):
+            assert rig.transition(name, Transition.TRANSITION_CONFIGURE), name
+            assert rig.transition(name, Transition.TRANSITION_ACTIVATE), name
+        world = sim_rig.world
+        start_m = world.stage_position_m()
+        pull(rig)
+        ended = rig.wait_for(lambda: [s for s in rig.diagnostics(STAGE_NODE)
+                                      if 'the pull reached its bound' in s.message],
+                             'the pull to end at its bound', 60.0)
+        assert ended[0].level == DiagnosticStatus.WARN
+        assert f'its start {start_m * 1e3:.4f} mm + travel_mm 0.5 mm' in ended[0].message
+        assert {kv.key: kv.value for kv in ended[0].values}[MOTION_STOPS_KEY] == '1'
+        assert world.stage_velocity_m_per_s() == 0.0
+        assert world.stage_position_m() == pytest.approx(start_m + 0.5e-3, abs=1e-9)
+    finally:
+        rig.close()
+
+
+class FakeSupervisorHeartbeat:
+    """The supervisor's heartbeat, from the test's client, until freeze() (as a SIGSTOP would
+    leave it) or resume()."""
+
+    def __init__(self, rig):
+        self._pub = rig.client.create_publisher(Header, resolve(HEARTBEAT),
+                                                HEARTBEAT.qos.publisher())
+        self._beating = threading.Event()
+        self._done = threading.Event()
+        self.last_s = None
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._beating.set()
+        self._thread.start()
+
+    def _run(self):
+        while not self._done.wait(HEARTBEAT_PERIOD_S):
+            if self._beating.is_set():
+                self._pub.publish(Header(frame_id='fake supervisor'))
+                self.last_s = time.monotonic()
+
+    def freeze(self):
+        self._beating.clear()
+        time.sleep(2 * HEARTBEAT_PERIOD_S)        # the beat that may have been on its way
+        return self.last_s
+
+    def resume(self):
+        self._beating.set()
+
+    def close(self):
+        self._done.set()
+        self._thread.join()
+
+
+def test_a_pull_stops_when_the_supervisors_heartbeat_lapses():
+    """The stage node stops a pull it was given while a supervisor's heartbeat was heard once
+    that heartbeat lapses, says why, refuses the next command while it stays silent, and takes
+    one again once it beats. The pull's bound (travel_mm 15) is far: only the lapse stops it."""
+    rig = Rig()
+    heartbeat = None
+    try:
+        sim_rig = rig.add_sim_rig({
+            SIM_WORLD_NODE: {'real_time_factor': 1.0},
+            STAGE_NODE: {'scene': SCENE, 'max_force_age_s': 5.0, 'travel_mm': 15.0},
+            LOADCELL_NODE: {'scene': SCENE}})
+        for name in (STAGE_NODE, LOADCELL_NODE):
+            assert rig.transition(name, Transition.TRANSITION_CONFIGURE), name
+            assert rig.transition(name, Transition.TRANSITION_ACTIVATE), name
+        heartbeat = FakeSupervisorHeartbeat(rig)
+        rig.wait_for(lambda: [s for s in rig.diagnostics(STAGE_NODE) if HEARTBEAT_AGE_KEY in
+                              {kv.key for kv in s.values}], 'the stage to hear the heartbeat')
+        world = sim_rig.world
+        start_m = world.stage_position_m()
+        pull(rig)
+        rig.wait_for(lambda: world.stage_position_m() > start_m + 0.2e-3, 'the pull', 30.0)
+        last_beat = heartbeat.freeze()
+        frozen_at_m = world.stage_position_m()
+        stopped = rig.wait_for(lambda: [s for s in rig.diagnostics(STAGE_NODE)
+                                        if 'supervisor heartbeat lost' in s.message],
+                               'the lapse to stop the stage', 30.0)
+        stop_heard_s = time.monotonic()
+        rig.wait_for(lambda: world.stage_velocity_m_per_s() == 0.0, 'the stage at rest', 30.0)
+        stopped_at_m = world.stage_position_m()
+        status = stopped[0]
+        values = {kv.key: kv.value for kv in status.values}
+        assert status.level == DiagnosticStatus.WARN
+        assert re.search(r'supervisor heartbeat lost for 0\.\d\d s \(limit 0\.4 s\): the pull at '
+                         r'2\.3300 mm/s was stopped', status.message), status.message
+        assert values[MOTION_STOPS_KEY] == '1'
+        assert stopped_at_m < start_m + 15e-3           # its bound was not what stopped it
+        print(f'heartbeat lapse: stop reported {stop_heard_s - last_beat:.2f} s after the last '
+              f'beat; {(stopped_at_m - frozen_at_m) * 1e3:.3f} mm pulled after it')
+        # silent: a new command is refused, the stage stays
+        rig.velocity.publish(Float64(data=PULL_M_PER_S))
+        rig.wait_for(lambda: [s for s in rig.diagnostics(STAGE_NODE)
+                              if 'refused: supervisor heartbeat lost' in s.message],
+                     'the refusal', 30.0)
+        time.sleep(0.3)
+        assert world.stage_velocity_m_per_s() == 0.0
+        heartbeat.resume()
+        time.sleep(0.3)
+        pull(rig)
+    finally:
+        if heartbeat is not None:
+            heartbeat.close()
         rig.close()
 
 

@@ -13,6 +13,7 @@ from mantis_rig.contract import (
     SIM_WORLD_NODE,
     STAGE_NODE,
     SUPERVISOR_STATE,
+    TRAVEL_NAME,
     resolve,
 )
 from mantis_rig.trial.conditions import ConditionError, TrialConditions, check_value
@@ -233,11 +234,12 @@ def test_force_ceiling_aborts_and_stops_the_stage():
 
 
 def test_the_trials_force_ceiling_is_set_on_every_guard_before_it_is_configured():
-    rig, _, outcome = run_trial(force_ceiling_n=12.5)
+    """And its travel limit on the stage, whose controller ends every pull there."""
+    rig, _, outcome = run_trial(force_ceiling_n=12.5, travel_mm=6.5)
     assert outcome['result'] == 'aborted'
     assert rig.parameters == {
         SIM_WORLD_NODE: [({'d_t_mm': 23.0, 'contact_angle_deg': 3.0, 'medium': 'air'}, None)],
-        STAGE_NODE: [({FORCE_CEILING_NAME: 12.5}, 'unconfigured')],
+        STAGE_NODE: [({FORCE_CEILING_NAME: 12.5, TRAVEL_NAME: 6.5}, 'unconfigured')],
         LOADCELL_NODE: [({FORCE_CEILING_NAME: 12.5}, 'unconfigured')]}
 
 

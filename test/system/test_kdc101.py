@@ -233,6 +233,52 @@ def test_move_at_then_stop(make_emulator, make_stage, velocity_mm_s):
     assert wait_until(lambda: not stage.state().moving, 2.0)
 
 
+@pytest.mark.parametrize('streams_status', [True, False], ids=['streaming', 'polled'])
+def test_a_bounded_pull_ends_at_its_bound_with_the_driver_gone(make_emulator, make_stage,
+                                                              streams_status):
+    """A pull with a bound is sent to the controller as MOT_MOVE_ABSOLUTE to the bound, at the
+    pull speed as its maximum velocity: the stage stops there, at rest, with nobody sending a
+    stop (the driver's process dead: no more messages, acks or polls, its port closed)."""
+    emu = make_emulator(position_mm=10.0, homed=True, streams_status=streams_status)
+    stage = make_stage(emu.port)
+    stage.move_at(2.0 * MM, bound_m=10.8 * MM)
+    assert wait_until(lambda: emu.mode == 'absolute', 2.0)
+    assert MOT_MOVE_ABSOLUTE in emu.received and MOT_MOVE_VELOCITY not in emu.received
+    assert emu.velparams['max_velocity'] == round(2.0 * VELOCITY_UNITS_PER_MM_S)
+    assert emu.speed_mm_s == pytest.approx(2.0, rel=1e-6)
+    assert wait_until(lambda: stage.state().moving and emu.position_mm > 10.2)
+    stage._shutdown()                       # as a SIGKILL leaves it: not a word more
+    assert_link_closed(stage, emu)
+    time.sleep(0.05)                         # what was on the line has been read
+    sent = len(emu.received)
+    assert wait_until(lambda: not emu.moving, 5.0)
+    assert emu.received[sent:] == []
+    assert emu.position_mm == pytest.approx(10.8, abs=1e-4)
+    time.sleep(0.2)
+    assert emu.position_mm == pytest.approx(10.8, abs=1e-4)
+
+
+def test_a_bounded_pull_reports_its_end_and_can_be_stopped_short(make_emulator, make_stage):
+    emu = make_emulator(position_mm=10.0, homed=True)
+    stage = make_stage(emu.port)
+    stage.move_at(2.4 * MM, bound_m=10.3 * MM)
+    assert wait_until(lambda: emu.position_mm > 10.29 and not stage.state().moving, 5.0)
+    assert not emu.moving
+    state = stage.state()
+    assert state.position_m == pytest.approx(10.3 * MM, abs=1e-7) and state.fault is None
+    stage.move_at(2.0 * MM, bound_m=12.0 * MM)
+    assert wait_until(lambda: emu.position_mm > 10.5)
+    stage.stop()
+    assert not emu.moving and emu.position_mm < 12.0
+    # refused before anything is sent: a bound behind the stage, or beyond the soft limit
+    sent = len(emu.received)
+    with pytest.raises(ConfigurationError, match='not ahead of the stage'):
+        stage.move_at(2.0 * MM, bound_m=10.0 * MM)
+    with pytest.raises(ConfigurationError, match='outside the soft travel limits'):
+        stage.move_at(2.0 * MM, bound_m=24.9 * MM)
+    assert [m for m in emu.received[sent:] if m in (MOT_MOVE_ABSOLUTE, MOT_MOVE_VELOCITY)] == []
+
+
 def test_move_at_zero_stops_and_stop_is_harmless_when_stopped(make_emulator, make_stage):
     emu = make_emulator(position_mm=10.0, homed=True)
     stage = make_stage(emu.port)

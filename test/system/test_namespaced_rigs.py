@@ -17,7 +17,7 @@ import pytest
 from test_trial import FAST, FAST_RETURN, SCENE, TRIAL_TIMEOUT_S, bag_of, wait_closed
 
 from mantis_rig import contract
-from mantis_rig.analysis.bag_input import read_trial_bag
+from mantis_rig.analysis.inputs.bag import read_trial_bag
 from mantis_rig.nodes.bringup import Stack, StackConfig
 from mantis_rig.nodes.supervisor_node import STATUS_NAME
 from mantis_rig.nodes.trial_client import TrialClient

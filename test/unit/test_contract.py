@@ -10,7 +10,7 @@ import pytest
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
 from mantis_rig import contract
-from mantis_rig.analysis.bag_input import read_trial_bag
+from mantis_rig.analysis.inputs.bag import read_trial_bag
 from mantis_rig.hardware.apt_units import Z8_COUNTS_PER_MM
 from mantis_rig.hardware.interfaces import StageLimits
 from mantis_rig.nodes.node_table import DEVICES, NODES
@@ -49,6 +49,8 @@ NOT_ROS_NAMES = {
     ('mantis_rig/hardware/nidaq.py', '/line'): 'part of a DAQ line name, Dev1/port0/line0',
     ('mantis_rig/recording/interfaces.py', '/msg/'): 'part of a message type, pkg/msg/Type',
     ('mantis_rig/analysis/intervals.py', 'm/s'): 'a unit, metres per second',
+    ('mantis_rig/nodes/stopping.py', '/proc/'): 'a path, /proc/<pid>/stat',
+    ('mantis_rig/nodes/stopping.py', '/stat'): 'a path, /proc/<pid>/stat',
 }
 
 
@@ -251,3 +253,9 @@ def test_the_synthetic_bag_offers_the_contracts_qos(tmp_path):
         replayed = replay_qos(name, offered)
         latched = contract.find_topic(name).qos.transient_local
         assert (replayed.durability == DurabilityPolicy.TRANSIENT_LOCAL) == latched, name
+
+
+def test_a_heartbeat_names_its_process_so_one_in_the_same_process_is_not_watched():
+    source = contract.heartbeat_source('supervisor_node', 4321)
+    assert contract.heartbeat_source_pid(source) == 4321
+    assert contract.heartbeat_source_pid('supervisor_node') is None      # an older supervisor

@@ -178,3 +178,23 @@ def test_setup_installs_the_launch_file():
     assert len(installed) == 1
     # ('share/' + PACKAGE + '/launch', [...])
     assert ast.unparse(installed[0].elts[0]) == "'share/' + PACKAGE + '/launch'"
+
+
+def test_a_node_process_that_ends_ends_the_launch():
+    """Issue 41: every node started gets an OnProcessExit handler that reports through
+    watchdog.LaunchWatch (tested in test_watchdog.py) and shuts the launch down; an OnShutdown
+    handler marks the launch's own exits; frozen processes are looked for on a timer."""
+    tree = launch_tree()
+    called = {getattr(node.func, 'id', None) for node in ast.walk(tree)
+              if isinstance(node, ast.Call)}
+    assert {'OnProcessExit', 'OnShutdown', 'RegisterEventHandler', 'EmitEvent', 'Shutdown',
+            'LaunchWatch', 'TimerAction'} <= called
+    handlers = [node for node in ast.walk(tree) if isinstance(node, ast.ListComp)
+                and any(getattr(n.func, 'id', None) == 'OnProcessExit'
+                        for n in ast.walk(node) if isinstance(n, ast.Call))]
+    assert len(handlers) == 1          # one per node: zip(names, nodes)
+    loop = handlers[0].generators[0]
+    assert ast.unparse(loop.iter) == 'zip(names, nodes)'
+    source = LAUNCH_FILE.read_text(encoding='utf-8')
+    assert 'names = processes(backend)' in source
+    assert 'additional_env={STOP_REASON_ENV:' in source

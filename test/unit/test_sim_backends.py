@@ -213,3 +213,31 @@ def test_a_move_ends_the_velocity_watchdog_and_arrives_exactly():
         runner.stop()
     assert all(not t.is_alive() for t in watchdogs)
     assert state.position_m == pytest.approx(start - 0.5e-3, abs=1e-9) and not state.moving
+
+
+def test_a_bounded_pull_ends_at_rest_on_its_bound_with_nobody_commanding():
+    """The simulated stage obeys a pull's bound as the controller does: the world takes the
+    stage there at the pull speed and stops it, at rest, with no stop ever sent (whoever
+    commanded the pull is gone), and never past it."""
+    scene, world, runner, port = make_rig(real_time_factor=0.0)
+    runner.start()
+    try:
+        stage = SimStage(port)
+        stage.open()
+        start = stage.state().position_m
+        bound = start + 2.0e-3       # long enough to reach the pull speed (4 mm/s² ramps)
+        stage.move_at(PULL_M_PER_S, bound_m=bound)
+        furthest, speeds = start, []
+        for _ in range(200):                      # 2 s of simulated time, in 10 ms steps
+            port.wait_until(port.now_s() + 0.01, timeout_s=60)
+            position, velocity = port.stage_state()
+            furthest = max(furthest, position)
+            speeds.append(velocity)
+        position, velocity = port.stage_state()
+        with pytest.raises(ConfigurationError, match='not ahead of the stage'):
+            stage.move_at(PULL_M_PER_S, bound_m=start)
+    finally:
+        runner.stop()
+    assert max(speeds) == pytest.approx(PULL_M_PER_S, rel=1e-9)     # the pull speed, capped
+    assert position == pytest.approx(bound, abs=1e-9) and velocity == 0.0
+    assert furthest <= bound + 1e-12

@@ -161,7 +161,7 @@ def test_the_force_ceiling_comes_from_the_rig_contract():
 
 
 def test_a_sweep_table_carries_the_warning(tmp_path):
-    from mantis_sim.studies.sweep import WARNING_COLUMN, read_table, run_sweep
+    from mantis_sim.studies.design.sweep import WARNING_COLUMN, read_table, run_sweep
     out = tmp_path / 'sweep.parquet'
     run_sweep('reference_air_23mm', ['integration.solver=LSODA', 'integration.rtol=0.001'],
               [{'spring.k_Nmm_per_rad': 47.7}, {'spring.k_Nmm_per_rad': 597.0}], out,
