@@ -115,7 +115,9 @@ def test_a_frozen_supervisor_stops_the_pull_and_its_trial_ends_aborted(ros, tmp_
         time.sleep(FROZEN_S)
         during = watch.since(frozen_s)
         os.kill(supervisor.pid, signal.SIGCONT)
-        final = client.wait_for_state(('aborted', 'done'), mark, 120.0)
+        # The trial's end is read from its bag, not heard: a participant silent for 20 s
+        # outlives Fast DDS's default lease, and after SIGCONT the others may take longer
+        # than the trial to match it again (seen under the suite's load).
         wait_until(lambda: (bag / 'metadata.yaml').exists(), 'the bag to close', 60.0)
     finally:
         if supervisor is not None and supervisor.poll() is None:
@@ -132,7 +134,6 @@ def test_a_frozen_supervisor_stops_the_pull_and_its_trial_ends_aborted(ros, tmp_
     assert furthest_m <= bound_m + 0.5e-3           # the criterion (6.5 mm past, before)
     assert furthest_m < bound_m - 1e-3              # and the heartbeat, not the bound, stopped it
     assert during[-1][2] == 0.0 and during[-1][1] == pytest.approx(rest[1], abs=1e-9)
-    assert final == 'aborted'
     outcome = BagReader(bag).metadata('trial_outcome')
     assert outcome['result'] == 'aborted'
     assert 'supervisor heartbeat lost for' in outcome['reason'], outcome['reason']

@@ -22,7 +22,7 @@ from mantis_sim.studies.rig_study.plan import plan_from_mapping
 
 RATE_HZ = 20_000.0
 NEWTONS_PER_VOLT = 11.12
-PERIOD_S = 3.0              # the fake robot loads for 3 s, then lets go (a 12 N drop)
+PERIOD_S = 2.0              # the fake robot loads for 2 s, then lets go (an 8 N drop)
 
 pytestmark = [pytest.mark.timeout(600), pytest.mark.slow, pytest.mark.ros]
 
