@@ -1,7 +1,7 @@
 """The study's analyst: one worker process, started fresh (spawn), that simulates the twin's
 forecast ensembles and measures each trial's bag while the rig runs the next trial, and
-writes the report while the rig's stack shuts down. It runs
-at a lower priority than the rig's processes, with one BLAS thread: a trial in progress keeps
+writes the report while the rig's stack shuts down. It runs on the CPU the rig leaves idle
+(Linux's SCHED_IDLE; elsewhere niceness 10), with one BLAS thread: a trial in progress keeps
 the machine first. Results come back in the order the work was asked for."""
 from __future__ import annotations
 
@@ -21,10 +21,13 @@ def _start_worker(parent_pid: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     from mantis_rig.nodes.stopping import watch_parent
     watch_parent(parent_pid)
-    try:
-        os.nice(NICENESS)
-    except OSError:
-        pass
+    try:           # only the CPU the rig leaves idle: a trial in progress is never slowed
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    except (AttributeError, OSError):
+        try:
+            os.nice(NICENESS)
+        except OSError:
+            pass
     from mantis_sim.studies.shared.blas import one_blas_thread
     one_blas_thread()
 
