@@ -188,14 +188,22 @@ class SimWorldNode(WithoutDefaultEventHandlers, Node):
         try:
             base = scene_for_conditions(self.scene, conditions)
             with self.runner.lock:
-                self.world.rebuild_latched(
-                    self._robots(self.world.strikes, base) if self._robots else base)
-                self._base, self.conditions = base, dict(conditions)
+                if self.world.held:
+                    # struck and not latched again yet (the next trial's start may come while
+                    # the stage is still on its way back): the next latching is built at them,
+                    # and a trial cannot pull before the robot is latched again
+                    self._base, self.conditions = base, dict(conditions)
+                    what = f'latching {self.world.strikes + 1} will be built'
+                else:
+                    self.world.rebuild_latched(
+                        self._robots(self.world.strikes, base) if self._robots else base)
+                    self._base, self.conditions = base, dict(conditions)
+                    what = f'latching {self.world.strikes} rebuilt'
         except InputError as exc:            # names the condition the scene cannot take
             return str(exc)
-        except SimulationError as exc:       # RobotInUse: loaded, or not latched
+        except SimulationError as exc:       # RobotInUse: loaded
             return f'{changed}: {exc}'
-        self.get_logger().info(f'latching {self.world.strikes} rebuilt at {changed}')
+        self.get_logger().info(f'{what} at {changed}')
         self.publish_diagnostics()           # a bag shows the robot the trial pulls on
         return None
 
