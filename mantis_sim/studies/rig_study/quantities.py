@@ -59,8 +59,6 @@ MEASUREMENT_ERROR = {'peak_tendon_force_N': 0.01, 'loading_work_mJ': 0.02,
                      'release_time_s': 0.01, 'peak_tip_speed_mps': 0.01,
                      'max_spring_energy_mJ': 0.005}
 
-FORCE_QUANTITIES = tuple(n for n, q in QUANTITIES.items() if q.source == 'force')
-MARKER_QUANTITIES = tuple(n for n, q in QUANTITIES.items() if q.source == 'markers')
 
 #: The trial conditions in words, for axes and prompts.
 CONDITION_LABELS = {'d_t_mm': ('guide distance', 'mm'), 'pull_speed_mm_s': ('pull speed', 'mm/s'),
@@ -72,5 +70,5 @@ def condition_axis(name: str) -> str:
     return f'{label} ({unit})' if unit else label
 
 
-__all__ = ['CONDITION_LABELS', 'FORCE_QUANTITIES', 'MARKER_QUANTITIES', 'MEASUREMENT_ERROR',
+__all__ = ['CONDITION_LABELS', 'MEASUREMENT_ERROR',
            'QUANTITIES', 'Quantity', 'condition_axis']
