@@ -170,6 +170,12 @@ HEARTBEAT = Topic('supervisor/heartbeat', 'std_msgs/msg/Header', COMMAND_QOS, SU
                   'recorded)')
 #: the supervisor's heartbeat period (s, steady clock)
 HEARTBEAT_PERIOD_S = 0.05
+PROGRESS = Topic('supervisor/progress', 'std_msgs/msg/Header', COMMAND_QOS, SUPERVISOR_NODE,
+                 'how far the running trial has got: stamp = the rig time up to which its '
+                 'trial thread has read the force stream and acted on it, sent at each of its '
+                 'polls; stamp 0 once no trial runs. The simulated world waits for it '
+                 '(`max_lead_s`), so that a starved supervisor slows the world rather than '
+                 'hearing a release late (not recorded)')
 
 
 def heartbeat_source(node_name: str, pid: int) -> str:
@@ -201,7 +207,7 @@ JOINT_ANGLES = Topic('analysis/joint_angles', 'sensor_msgs/msg/JointState', SENS
 #: every topic a trial's bag holds (the recorder's)
 TRIAL_TOPICS = (JOINT_STATE, VELOCITY_COMMAND, POSITION_COMMAND, FORCE_BLOCK, WRENCH,
                 TRIGGER_TIME, MARKERS, SUPERVISOR_STATE, DIAGNOSTICS)
-TOPICS = (*TRIAL_TOPICS, HEARTBEAT, CLOCK, JOINT_ANGLES)
+TOPICS = (*TRIAL_TOPICS, HEARTBEAT, PROGRESS, CLOCK, JOINT_ANGLES)
 TOPIC_BY_NAME = {t.name: t for t in TOPICS}
 
 _TRIGGER = 'std_srvs/srv/Trigger'
@@ -483,7 +489,8 @@ WORLD_PARAMETERS = (
               'it can)', (0.0, 1000.0)),
     ParamSpec('step_s', 0.01, 's', 'simulated time per world step', (1e-4, 0.1)),
     ParamSpec('max_lead_s', 0.05, 's', 'simulated time the world may run ahead of the load '
-              f'cell\'s {FORCE_BLOCK} stream while that streams (0: no limit)', (0.0, 10.0)),
+              f'cell\'s {FORCE_BLOCK} stream, and of a running trial\'s {PROGRESS}, while '
+              'the force streams (0: no limit)', (0.0, 10.0)),
     ParamSpec('relatch', True, '', 'the operator re-latches the robot once the stage is back '
               'at its start after a strike (false: forgets, which the supervisor\'s latch '
               'check must catch)'),

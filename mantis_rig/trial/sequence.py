@@ -24,6 +24,11 @@ taking up slack: the tendon stays slack over ``latch_check_mm`` of take-up.
 In simulation the trial's conditions (d_t_mm, contact_angle_deg, medium) are first set on the
 simulated world, which builds the latched robot from them; one it cannot apply ends the trial
 before anything moves, with the world's reason.
+
+At each poll the worker reports its progress (``report_progress``): the rig time up to which it
+has read the force stream and acted on what it read; 0 once the trial has ended. The simulated
+world waits for it, so a worker starved of the processor slows the world down instead of
+taking up slack past the release or hearing the release late.
 """
 from __future__ import annotations
 
@@ -130,6 +135,7 @@ class RigPort(Protocol):
     def move_to(self, position_m: float) -> None: ...
     def stop_stage(self) -> None: ...                     # velocity 0 and stage/stop, at once
     def publish_state(self, state: str, reason: str) -> None: ...
+    def report_progress(self, rig_time_s: float) -> None: ...   # 0: no trial running
 
 
 class TrialSequence:
@@ -220,11 +226,25 @@ class TrialSequence:
         deadline = time.monotonic() + timeout_s
         while True:
             self._check()
+            heard_s = self._heard_until_s()
             if ready():
                 return True
             if time.monotonic() > deadline:
                 return False
-            time.sleep(POLL_S)
+            self._pause(heard_s)
+
+    def _heard_until_s(self) -> float:
+        """The rig time up to which this process has heard the rig: its clock, and the force
+        stream's end once that streams (it may lag the clock)."""
+        now_s = self.rig.now_s()
+        force_end_s = self.monitor.end_t_s
+        return now_s if force_end_s is None else min(now_s, force_end_s)
+
+    def _pause(self, acted_until_s: float) -> None:
+        """Between two polls: report that everything heard up to acted_until_s (read before
+        the poll's decision) has been acted on, then sleep one poll period."""
+        self.rig.report_progress(acted_until_s)
+        time.sleep(POLL_S)
 
     def _await(self, pending: Pending, what: str):
         self._wait(pending.done, what)
@@ -559,6 +579,7 @@ class TrialSequence:
         finally:
             if self.monitor.release_t_s is not None:     # it struck: a person re-latches it
                 self._set_state('waiting_for_relatch', RELATCH_REASON)
+            self.rig.report_progress(0.0)                # nothing more to wait for
             self.finished.set()
         return outcome
 
@@ -577,13 +598,16 @@ class TrialSequence:
         deadline = time.monotonic() + self.conditions.phase_timeout_s
 
         def wait(ready: Callable[[], bool]) -> None:
-            while not ready():
+            while True:
+                heard_s = self._heard_until_s()
+                if ready():
+                    return
                 if self._stop_return.is_set():
                     raise _ReturnEnded('stopped by a second abort')
                 if time.monotonic() > deadline:
                     self.rig.stop_stage()
                     raise _ReturnEnded(f'not back within {self.conditions.phase_timeout_s} s')
-                time.sleep(POLL_S)
+                self._pause(heard_s)
 
         try:
             error_m = self._move_to(target, 'return to the start', wait)
@@ -602,9 +626,10 @@ class TrialSequence:
         seen = self._stage_updates
         deadline = time.monotonic() + STOP_CONFIRM_S
         while time.monotonic() < deadline:
+            heard_s = self._heard_until_s()
             if self._stage_updates > seen and self._at_rest():
                 return 'true'
-            time.sleep(POLL_S)
+            self._pause(heard_s)
         return 'unconfirmed'
 
     def _outcome(self, result: str, reason: str) -> dict:

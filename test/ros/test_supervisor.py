@@ -84,6 +84,8 @@ class FakeRig:
         self.parameters = {}
         self.trigger_t = None
         self.markers_sent = False
+        self.progress = []
+        self.fed_until_s = None
         self._run = threading.Event()
 
     # RigPort
@@ -136,6 +138,10 @@ class FakeRig:
     def publish_state(self, state, reason):
         self.states.append(state)
 
+    def report_progress(self, rig_time_s):
+        # what the trial said it had acted on, beside what it could have heard by then
+        self.progress.append((rig_time_s, self.t, self.fed_until_s))
+
     # the world
     def force(self, pos):
         pulled_mm = (pos - self.origin) * 1e3
@@ -158,6 +164,7 @@ class FakeRig:
         if self.target is not None and abs(self.target - self.pos) < 1e-9:
             self.v, self.target = 0.0, None
         seq = self.seq
+        self.fed_until_s = t0 + n / RATE
         seq.on_force_block(t0, 1 / RATE, forces)
         seq.on_stage_state(self.pos, self.v)
         if self.trigger_t is not None and not self.markers_sent and self.camera \
@@ -208,6 +215,32 @@ def test_a_trial_runs_through_every_phase_and_returns():
     assert abs(rig.pos - 0.010) < 20e-6           # back at the start
     assert outcome['force_gaps'] == 0 and outcome['force_samples'] > 20_000
     assert 'pulling@' in outcome['states']
+
+
+def test_the_trial_reports_only_what_it_has_heard_and_acted_on():
+    """Its progress (which the simulated world waits for) never runs ahead of the rig's
+    clock or of the force it was fed, never goes back within a trial, goes on while an
+    aborted trial returns the stage, and is 0 once the trial has ended."""
+    def abort_mid_pull(rig, seq):
+        def abort():
+            while seq.state != 'pulling':
+                time.sleep(0.001)
+            time.sleep(0.05)
+            seq.abort('operator')
+        threading.Thread(target=abort, daemon=True).start()
+
+    for before, result in ((None, 'completed'), (abort_mid_pull, 'aborted')):
+        rig, seq, outcome = run_trial(before=before)
+        assert outcome['result'] == result, outcome
+        *during, (last, _, _) = rig.progress
+        assert last == 0.0 and len(during) > 10
+        for acted_s, clock_s, fed_s in during:
+            assert 0.0 < acted_s <= clock_s
+            assert fed_s is None or acted_s <= fed_s
+        acted = [a for a, _, _ in during]
+        assert acted == sorted(acted)
+        returning = dict(seq.state_times)['returning']
+        assert max(acted) > returning          # reported while the stage went back
 
 
 def test_homes_takes_up_slack_and_tares_when_needed():
