@@ -30,6 +30,11 @@ from mantis_rig.nodes.ros_env import claim_free_domain, release_domain
 
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
+# UDP on loopback, not Fast DDS's shared memory: the suite kills node processes by design, and
+# a killed process's shared-memory ports can leave a later participant matched but deaf
+# (eProsima/Fast-DDS#5053, #5469; here: a fault test's observer that heard the supervisor's
+# states but none of the stage's joint states, on both of its attempts).
+os.environ['FASTDDS_BUILTIN_TRANSPORTS'] = 'UDPv4'
 
 #: The project's own copies of the real trials (test/data/PROVENANCE.md says where from).
 # the KDC101 emulator's fixtures (make_emulator), for the driver's and mantis doctor's tests
