@@ -420,16 +420,6 @@ def _record(bag: Path, work: Path) -> tuple[str, bool]:
             f'{states[-1] if states else "?"}', report.messages_recovered > 0)
 
 
-def run_case_observed(case: Case, work: Path, next_trial: bool = True) -> Result:
-    """run_case, run once more when this process heard nothing of the stage (a DDS discovery
-    that failed for the observer alone: Fast DDS's shared-memory ports, left locked by the
-    processes the suite kills, have been seen to fail it)."""
-    result = run_case(case, work, next_trial)
-    if result.stage_note.startswith('not heard by the observer'):
-        result = run_case(case, work, next_trial)
-    return result
-
-
 def _bound_from_the_bag(result, bag: Path, work: Path, case: Case) -> None:
     """The travel past the bound from the trial's own bag (its joint states, rig time), when
     the observer heard none: the bound from where the stage was when the phase began."""

@@ -14,7 +14,7 @@ Also: a KDC101 whose node process is gone is stopped at its serial port (MOT_MOV
 import re
 import time
 
-from fault_injection import Case, run_case_observed
+from fault_injection import Case, run_case
 import pytest
 
 from mantis_rig.hardware.kdc101 import Kdc101Stage
@@ -59,7 +59,7 @@ def work(ros, tmp_path):
 
 @pytest.mark.parametrize('case', CASES, ids=[case.id for case in CASES])
 def test_a_process_killed_or_frozen_mid_trial_fails_safe(work, case):
-    result = run_case_observed(case, work)
+    result = run_case(case, work)
     summary = (f'{case.id}: past {result.past_bound_mm} mm, stop {result.stop_s} s, '
                f'{result.stage_note}; record {result.record}; exit {result.exit_status}: '
                f'{result.line}; left {result.left_running}; next {result.next_trial}')
