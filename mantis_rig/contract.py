@@ -170,12 +170,14 @@ HEARTBEAT = Topic('supervisor/heartbeat', 'std_msgs/msg/Header', COMMAND_QOS, SU
                   'recorded)')
 #: the supervisor's heartbeat period (s, steady clock)
 HEARTBEAT_PERIOD_S = 0.05
-PROGRESS = Topic('supervisor/progress', 'std_msgs/msg/Header', COMMAND_QOS, SUPERVISOR_NODE,
-                 'how far the running trial has got: stamp = the rig time up to which its '
-                 'trial thread has read the force stream and acted on it, sent at each of its '
-                 'polls; stamp 0 once no trial runs. The simulated world waits for it '
-                 '(`max_lead_s`), so that a starved supervisor slows the world rather than '
-                 'hearing a release late (not recorded)')
+PROGRESS = Topic('progress', 'std_msgs/msg/Header', COMMAND_QOS,
+                 f'{SUPERVISOR_NODE}, {STAGE_NODE}',
+                 'how far a consumer whose reactions must come in time on the rig\'s clock has '
+                 'got: frame_id names it (`supervisor_node/trial`: the trial thread, sent at '
+                 'each of its polls; `stage_node/force_guard`), stamp = the rig time up to which '
+                 'it has heard the force stream and acted on it; stamp 0: it waits for nothing '
+                 'now. The simulated world waits for each (`max_lead_s`), so that a starved '
+                 'consumer slows the world rather than hearing a release late (not recorded)')
 
 
 def heartbeat_source(node_name: str, pid: int) -> str:
@@ -489,8 +491,8 @@ WORLD_PARAMETERS = (
               'it can)', (0.0, 1000.0)),
     ParamSpec('step_s', 0.01, 's', 'simulated time per world step', (1e-4, 0.1)),
     ParamSpec('max_lead_s', 0.05, 's', 'simulated time the world may run ahead of the load '
-              f'cell\'s {FORCE_BLOCK} stream, and of a running trial\'s {PROGRESS}, while '
-              'the force streams (0: no limit)', (0.0, 10.0)),
+              f'cell\'s {FORCE_BLOCK} stream, and of each consumer\'s {PROGRESS}, while the '
+              'force streams (0: no limit)', (0.0, 10.0)),
     ParamSpec('relatch', True, '', 'the operator re-latches the robot once the stage is back '
               'at its start after a strike (false: forgets, which the supervisor\'s latch '
               'check must catch)'),

@@ -13,23 +13,22 @@ from lifecycle_msgs.srv import ChangeState, GetState
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters, SetParametersAtomically
-from std_msgs.msg import Float64, Header
+from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
 from mantis_rig import contract
 from mantis_rig.contract import DEVICE_NODES
 from mantis_rig.trial.sequence import Pending
 
-from .device_node import time_msg
+from .progress import ProgressReporter
 
 TRIGGER_SERVICES = tuple(service.name for service in contract.DEVICE_SERVICES)
 TRANSITIONS = {'configure': Transition.TRANSITION_CONFIGURE,
                'activate': Transition.TRANSITION_ACTIVATE,
                'deactivate': Transition.TRANSITION_DEACTIVATE}
 SERVICE_WAIT_S = 10.0
-# Progress is sent once it has moved on by this much rig time (or back, or to 0): a world step
-# (the world may run `max_lead_s`, 0.05 s, ahead of it).
-PROGRESS_STEP_S = 0.01
+#: the supervisor's part that reports progress (mantis_rig.nodes.progress)
+TRIAL_CONSUMER = 'trial'
 #: nodes whose parameters are set all or none
 ATOMIC_NODES = (contract.SIM_WORLD_NODE,)
 
@@ -65,9 +64,7 @@ class RigClient:
                                                c.VELOCITY_COMMAND.qos.publisher())
         self._position = node.create_publisher(Float64, c.POSITION_COMMAND.name,
                                                c.POSITION_COMMAND.qos.publisher())
-        self._progress = node.create_publisher(Header, c.PROGRESS.name,
-                                               c.PROGRESS.qos.publisher())
-        self._progress_s: float | None = None
+        self._progress = ProgressReporter(node, TRIAL_CONSUMER)
 
     # ------------------------------------------------------------------ RigPort
     def now_s(self) -> float:
@@ -127,14 +124,7 @@ class RigClient:
         self.call(contract.STAGE_STOP.name, wait=False)
 
     def report_progress(self, rig_time_s: float) -> None:
-        last = self._progress_s
-        if rig_time_s > 0.0 and last and last <= rig_time_s < last + PROGRESS_STEP_S:
-            return
-        self._progress_s = rig_time_s
-        try:
-            self._progress.publish(Header(stamp=time_msg(rig_time_s)))
-        except RuntimeError:     # shutting down (its context gone): nothing waits for it then
-            pass
+        self._progress.report(rig_time_s)
 
     # ------------------------------------------------------------------ plumbing
     def _full_name(self, client) -> str:

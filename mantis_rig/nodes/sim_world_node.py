@@ -3,8 +3,8 @@
 A thread advances the mantis_sim World by `step_s` of simulated time per step, paced at
 `real_time_factor` (0: as fast as it can; when a step is late, simulated time slips rather than
 catching up), and publishes /clock after each step. It waits while the load cell's force
-stream, or a running trial's progress (/supervisor/progress), lags it by more than
-`max_lead_s`. The simulated devices reach the world by
+stream, or a consumer's progress (/progress: the supervisor's trial, the stage's force guard),
+lags it by more than `max_lead_s`. The simulated devices reach the world by
 direct calls (a LocalWorldPort on `runner`), in the same process: the node is one part of
 mantis_rig.nodes.sim_rig, the simulated rig. Once a wall second, /diagnostics gets the status
 `sim_world_node: world`, and at once whenever the robot on the latch changes (a re-latch, a
@@ -93,20 +93,20 @@ class SimWorldNode(WithoutDefaultEventHandlers, Node):
         # Back-pressure: on a busy machine the stack perceives the world late (force blocks
         # reached the supervisor up to 0.4 s of simulated time late in one process at 1x, and
         # the camera's buffer missed the strike). The world waits for the force stream and for
-        # the running trial's progress (a starved supervisor took up slack past the release
-        # at --real-time-factor 0); the subscriptions sit on a lean node of their own, as the
-        # supervisor's recorder does.
+        # its consumers' progress (mantis_rig.nodes.progress: a starved supervisor took up
+        # slack past the release at --real-time-factor 0, a starved stage guard tripped on
+        # stale force); the subscriptions sit on a lean node of their own, as the supervisor's
+        # recorder does.
         self.max_lead_s = value('max_lead_s')
         self._daq_end_s: float | None = None
         self._daq_heard = 0.0
-        self._trial_progress_s = 0.0          # 0: no trial running
-        self._trial_heard = 0.0
+        self.progress: dict[str, tuple[float, float]] = {}   # consumer: (rig s, heard at)
         self._pacing = SideNode(self, contract.PACING_SUFFIX)
         self._pacing.node.create_subscription(Float64MultiArray, contract.FORCE_BLOCK.name,
                                               self._on_daq_block,
                                               contract.FORCE_BLOCK.qos.subscriber())
         self._pacing.node.create_subscription(Header, contract.PROGRESS.name,
-                                              self._on_trial_progress,
+                                              self._on_progress,
                                               contract.PROGRESS.qos.subscriber())
         self.runner = _StepRunner(self.world, value('real_time_factor'), self.step_s, self)
         self.runner.start()
@@ -127,22 +127,22 @@ class SimWorldNode(WithoutDefaultEventHandlers, Node):
         self._daq_end_s = block.t0_s + block.period_s * block.force_n.size
         self._daq_heard = time.monotonic()
 
-    def _on_trial_progress(self, msg: Header) -> None:
-        self._trial_progress_s = msg.stamp.sec + msg.stamp.nanosec * 1e-9
-        self._trial_heard = time.monotonic()
+    def _on_progress(self, msg: Header) -> None:
+        self.progress[msg.frame_id] = (
+            msg.stamp.sec + msg.stamp.nanosec * 1e-9, time.monotonic())
 
     def waiting_for_consumers(self) -> bool:
         """True while the force streams and lags the world by more than max_lead_s, or a
-        running trial's progress does. A consumer not heard for STREAM_ALIVE_S (dead, frozen)
-        is not waited for: the rig's own guards deal with it, in simulated time."""
+        consumer's progress does. A consumer not heard for STREAM_ALIVE_S (dead, frozen) is not
+        waited for: the rig's own guards deal with it, in simulated time."""
         end = self._daq_end_s
         now = time.monotonic()
         if self.max_lead_s <= 0 or end is None or now - self._daq_heard >= STREAM_ALIVE_S:
             return False
         behind_s = self.world.time_s - self.max_lead_s
-        trial = self._trial_progress_s
-        return end < behind_s or (
-            trial > 0 and now - self._trial_heard < STREAM_ALIVE_S and trial < behind_s)
+        return end < behind_s or any(
+            0.0 < progress_s < behind_s and now - heard < STREAM_ALIVE_S
+            for progress_s, heard in list(self.progress.values()))
 
     def publish_clock(self, msg: Clock) -> None:
         self._clock_pub.publish(msg)

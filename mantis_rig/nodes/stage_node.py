@@ -36,7 +36,8 @@ heartbeat ever heard (no supervisor: a tool or a test driving the stage) motions
 watched, nor are they by a supervisor in this same process (the one-process layout), which
 could not freeze without freezing this node with it. The heartbeat's age, the longest gap
 between two heard while active and the longest between two sent (their stamps: the
-supervisor's steady clock) are on /diagnostics.
+supervisor's steady clock) are on /diagnostics. While active, its force guard reports how far
+it has read the force stream on /progress (mantis_rig.nodes.progress).
 """
 from __future__ import annotations
 
@@ -64,6 +65,7 @@ from mantis_rig.nodes.clock_ticker import ClockTicker
 from mantis_rig.nodes.device_node import ERROR, OK, WARN, DeviceNode
 from mantis_rig.nodes.executors import SideNode, run_node
 from mantis_rig.nodes.lean_node import LeanNode
+from mantis_rig.nodes.progress import ProgressReporter
 from mantis_rig.recording.force_block import force_block_from_msg
 
 HOME_TIMEOUT_S = 120.0
@@ -127,6 +129,8 @@ class StageNode(DeviceNode):
         self._heartbeat_max_gap_s = 0.0
         self._supervised: str | None = None
         self.add_post_set_parameters_callback(self._on_parameters_set)
+        # how far the guard has read the force stream, for the simulated world to wait for
+        self._guard_progress = ProgressReporter(self, contract.FORCE_GUARD_SUFFIX)
         self._force_feed = SideNode(self, contract.FORCE_GUARD_SUFFIX)
         self._force_feed.node.create_subscription(Float64MultiArray, contract.FORCE_BLOCK.name,
                                                   self._on_force_block,
@@ -187,6 +191,7 @@ class StageNode(DeviceNode):
         if ticker is not None:
             ticker.stop()
         self._stop_motion()
+        self._guard_progress.report(0.0)                          # no pull to guard now
 
     def diagnostic_values(self) -> dict:
         values = {}
@@ -249,12 +254,15 @@ class StageNode(DeviceNode):
         if stage is None:
             return
         try:
-            trip = stage.observe_force(force_block_from_msg(msg).force_n)
+            block = force_block_from_msg(msg)
+            trip = stage.observe_force(block.force_n)
         except (DeviceError, ValueError) as exc:    # a malformed block: force_block's own
             self.fault(f'force guard: {exc}')
             return
         if trip is not None:
             self._report_trip(trip)
+        if self.is_active:
+            self._guard_progress.report(block.t0_s + block.period_s * block.force_n.size)
 
     def _report_trip(self, trip) -> None:
         """A force-guard trip (over the ceiling, or readings gone stale) is not a device fault:

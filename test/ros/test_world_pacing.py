@@ -1,6 +1,6 @@
 """The simulated world's back-pressure: at --real-time-factor 0 it runs no further than
-`max_lead_s` ahead of a running trial's progress (/supervisor/progress) while the force
-streams, and stops waiting for a trial that ended (progress 0) or that went silent."""
+`max_lead_s` ahead of its slowest consumer's progress (/progress) while the force streams, and
+stops waiting for a consumer that waits for nothing (progress 0) or that went silent."""
 from __future__ import annotations
 
 import time
@@ -18,6 +18,7 @@ from mantis_rig.recording.force_block import force_block_to_msg
 LEAD_S = 0.05
 STEP_S = 0.01
 WAIT_S = 30.0
+TRIAL, GUARD = 'supervisor_node/trial', 'stage_node/force_guard'
 
 
 def _until(condition, what: str, send=lambda: None) -> None:
@@ -34,7 +35,7 @@ def _until(condition, what: str, send=lambda: None) -> None:
         assert time.monotonic() < deadline, f'timed out waiting for {what}'
 
 
-def test_the_world_waits_for_a_running_trial_and_not_for_a_silent_one(ros):
+def test_the_world_waits_for_its_slowest_consumer_and_not_for_a_silent_one(ros):
     world_node = SimWorldNode(parameter_overrides=[
         Parameter('real_time_factor', value=0.0), Parameter('max_lead_s', value=LEAD_S),
         Parameter('step_s', value=STEP_S)])
@@ -47,10 +48,11 @@ def test_the_world_waits_for_a_running_trial_and_not_for_a_silent_one(ros):
     def stream_force(end_s: float) -> None:
         force.publish(force_block_to_msg(end_s - 1e-3, 1e-3, [0.0]))
 
-    def report(progress_s: float) -> None:
-        _until(lambda: abs(world_node._trial_progress_s - progress_s) < 1e-9,  # to the ns
-               'the progress to be heard',
-               lambda: progress.publish(Header(stamp=time_msg(progress_s))))
+    def report(progress_s: float, consumer: str = TRIAL) -> None:
+        _until(lambda: consumer in world_node.progress        # to the nanosecond
+               and abs(world_node.progress[consumer][0] - progress_s) < 1e-9,
+               f'the progress of {consumer} to be heard',
+               lambda: progress.publish(Header(stamp=time_msg(progress_s), frame_id=consumer)))
 
     def a_trial_at_the_worlds_time() -> float:
         """Hold the world by a force stream behind it, report a trial there, then let the
@@ -60,6 +62,7 @@ def test_the_world_waits_for_a_running_trial_and_not_for_a_silent_one(ros):
                'the force stream to be heard', lambda: stream_force(0.001))
         held_at_s = world.time_s
         report(held_at_s)
+        report(held_at_s + 100.0, GUARD)     # another consumer, far ahead
         stream_force(1e6)
         return held_at_s
 
@@ -69,19 +72,22 @@ def test_the_world_waits_for_a_running_trial_and_not_for_a_silent_one(ros):
         held_at_s = a_trial_at_the_worlds_time()
         for _ in range(5):                   # heard again and again: the world stays held
             report(held_at_s)
+            report(held_at_s + 100.0, GUARD)
             stream_force(1e6)
             time.sleep(0.1)
             assert world.time_s <= held_at_s + LEAD_S + STEP_S * 1.5, world.time_s
         report(0.0)                          # the trial ended: nothing to wait for
+        report(held_at_s + 2.0, GUARD)
         _until(lambda: world.time_s > held_at_s + 1.0, 'the world after the trial ended')
 
         silent_at_s = a_trial_at_the_worlds_time()
-        while True:                          # only the force streams
+        while True:                          # the trial silent, the others going on
             world_time_s = world.time_s
-            if time.monotonic() - world_node._trial_heard >= STREAM_ALIVE_S:
+            if time.monotonic() - world_node.progress[TRIAL][1] >= STREAM_ALIVE_S:
                 break
             assert world_time_s <= silent_at_s + LEAD_S + STEP_S * 1.5, world_time_s
             stream_force(1e6)
+            report(silent_at_s + 100.0, GUARD)
             time.sleep(0.1)
         _until(lambda: world.time_s > silent_at_s + 1.0, 'the world after the trial went silent')
     finally:
