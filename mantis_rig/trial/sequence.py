@@ -23,7 +23,9 @@ taking up slack: the tendon stays slack over ``latch_check_mm`` of take-up.
 
 In simulation the trial's conditions (d_t_mm, contact_angle_deg, medium) are first set on the
 simulated world, which builds the latched robot from them; one it cannot apply ends the trial
-before anything moves, with the world's reason.
+before anything moves, with the world's reason. A new robot steps the tendon force: the trial
+reads the force only from after the world's status reported the robot at its conditions
+(``on_world_status``), so that a step still on its way is not taken for the release.
 
 At each poll the worker reports its progress (``report_progress``): the rig time up to which it
 has read the force stream and acted on what it read; 0 once the trial has ended. The simulated
@@ -175,6 +177,8 @@ class TrialSequence:
         self.device_messages: dict[str, str] = {}
         self.device_in_error: dict[str, bool] = {}
         self._trigger_call: Pending | None = None
+        self._world_asked = False
+        self.world_built_s: float | None = None   # rig time the world had the trial's robot
 
     # ------------------------------------------------------------------ status
     @property
@@ -234,11 +238,18 @@ class TrialSequence:
             self._pause(heard_s)
 
     def _heard_until_s(self) -> float:
-        """The rig time up to which this process has heard the rig: its clock, and the force
-        stream's end once that streams (it may lag the clock)."""
-        now_s = self.rig.now_s()
+        """The rig time up to which this process has heard the rig and acted on it: its
+        clock, and the force stream's end once that streams (it may lag the clock); no further
+        than the release while the camera's trigger is on its way (its buffer must hold the
+        strike)."""
+        heard_s = self.rig.now_s()
         force_end_s = self.monitor.end_t_s
-        return now_s if force_end_s is None else min(now_s, force_end_s)
+        if force_end_s is not None:
+            heard_s = min(heard_s, force_end_s)
+        trigger, release_s = self._trigger_call, self.monitor.release_t_s
+        if trigger is not None and not trigger.done() and release_s is not None:
+            heard_s = min(heard_s, release_s)
+        return heard_s
 
     def _pause(self, acted_until_s: float) -> None:
         """Between two polls: report that everything heard up to acted_until_s (read before
@@ -297,6 +308,20 @@ class TrialSequence:
             self.marker_span_s = (first_s, last_s) if span is None else \
                 (min(span[0], first_s), max(span[1], last_s))
             self.marker_frames += n_frames
+
+    def on_world_status(self, time_s: float, conditions: dict) -> None:
+        """The simulated world's status at rig time ``time_s``: the conditions its current
+        robot was built at (WORLD_CONDITION_NAMES; numbers as its diagnostics print them)."""
+        if not self._world_asked or self.world_built_s is not None:
+            return
+        for name in WORLD_CONDITION_NAMES:
+            wanted, built = getattr(self.conditions, name), conditions.get(name)
+            if isinstance(wanted, str):
+                if built != wanted:
+                    return
+            elif built is None or not math.isclose(float(built), wanted, rel_tol=1e-5):
+                return
+        self.world_built_s = time_s
 
     def on_device_message(self, node: str, message: str, in_error: bool = False) -> None:
         self.device_messages[node] = message
@@ -386,6 +411,7 @@ class TrialSequence:
         # the first call of a trial to the rig: a reply lost while DDS still matches a process
         # that has just started is asked for again (setting the same values again is accepted)
         deadline = time.monotonic() + c.phase_timeout_s
+        self._world_asked = True
         while True:
             pending = self.rig.set_parameters(SIM_WORLD_NODE, values)
             if self._wait_for(pending.done, min(QUERY_RETRY_S, deadline - time.monotonic())):
@@ -490,6 +516,11 @@ class TrialSequence:
     def _take_up_slack(self) -> None:
         self._set_state('taking_up_slack')
         self._wait(lambda: self.monitor.latest_n is not None, 'the force stream')
+        if self.conditions.backend == 'sim':
+            self._wait(lambda: self.world_built_s is not None,
+                       'the simulated world\'s status at the trial\'s conditions')
+            self._wait(lambda: self.monitor.end_t_s > self.world_built_s,
+                       'the force of the robot built at the trial\'s conditions')
         c = self.conditions
         if self.monitor.latest_n < c.slack_force_n:
             self.pull_start_position_m = start = self.stage_position_m

@@ -123,6 +123,9 @@ class FakeRig:
         self.parameters.setdefault(node, []).append((dict(values), self.lifecycle.get(node)))
         if node in self.refuse:
             return Pending((False, self.refuse[node]), done=True)
+        if node == SIM_WORLD_NODE:          # the world's status: the robot at them, now
+            self.seq.on_world_status(self.t, {k: f'{v:g}' if isinstance(v, float) else v
+                                              for k, v in values.items()})
         return Pending((True, ''), done=True)
 
     def move_at(self, v):
@@ -283,6 +286,44 @@ def test_a_simulated_trial_sets_its_conditions_on_the_world_before_anything_else
         ({'d_t_mm': 19.0, 'contact_angle_deg': 5.0, 'medium': 'water'}, None)]
     rig, _, outcome = run_trial(backend='hardware')       # no world on the real rig
     assert SIM_WORLD_NODE not in rig.parameters
+
+
+class BuildsTheRobotLate(FakeRig):
+    """A world that answers at once but builds the robot at the trial's conditions 0.3 s of
+    rig time later (a busy machine, the request on its way): the tendon force steps down by
+    1.5 N then, and its status says so."""
+
+    BUILD_AFTER_S = 0.3
+
+    def __init__(self):
+        super().__init__()
+        self.build_at_s = self.built = None
+
+    def set_parameters(self, node, values):
+        if node != SIM_WORLD_NODE:
+            return super().set_parameters(node, values)
+        self.parameters.setdefault(node, []).append((dict(values), None))
+        self.build_at_s, self.built = self.t + self.BUILD_AFTER_S, dict(values)
+        return Pending((True, ''), done=True)
+
+    def force(self, pos):
+        built = self.build_at_s is not None and self.t >= self.build_at_s
+        return super().force(pos) - (1.5 if built else 0.0)
+
+    def step(self, dt=0.01):
+        super().step(dt)
+        if self.built is not None and self.t >= self.build_at_s:
+            values, self.built = self.built, None
+            self.seq.on_world_status(self.t, {k: str(v) for k, v in values.items()})
+
+
+def test_the_force_step_of_a_robot_built_late_is_not_taken_for_the_release():
+    rig, seq, outcome = run_trial(BuildsTheRobotLate(), d_t_mm=19.0)
+    assert outcome['result'] == 'completed', outcome
+    pulling_s = dict(seq.state_times)['pulling']
+    assert pulling_s >= rig.build_at_s
+    # the release 3 mm into the pull, at 2.33 mm/s: not the step when the robot was built
+    assert float(outcome['release_time_s']) - pulling_s == pytest.approx(3 / 2.33, abs=0.05)
 
 
 def test_a_lost_answer_from_the_simulated_world_is_asked_for_again(monkeypatch):
