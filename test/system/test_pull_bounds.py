@@ -84,6 +84,14 @@ def wait_until(condition, what, timeout_s=120.0):
         time.sleep(0.01)
 
 
+def pull_start_m(bag: Path) -> float:
+    """Where the trial's pull started: the stage's last rest before it (after taking up
+    slack), from the bag (this process may have matched the stage only once it pulled)."""
+    states = [m.message for m in BagReader(bag).messages([resolve(JOINT_STATE)])]
+    pull = next(i for i, s in enumerate(states) if s.velocity[0] >= 0.9 * PULL_M_PER_S)
+    return next(s.position[0] for s in reversed(states[:pull]) if s.velocity[0] == 0.0)
+
+
 def test_a_frozen_supervisor_stops_the_pull_and_its_trial_ends_aborted(ros, tmp_path):
     config = StackConfig(scene=SCENE, processes='multi', real_time_factor=1.0,
                          supervisor={'out': str(tmp_path), 'travel_mm': TRAVEL_MM},
@@ -110,8 +118,6 @@ def test_a_frozen_supervisor_stops_the_pull_and_its_trial_ends_aborted(ros, tmp_
         frozen_s = time.monotonic()
         before = watch.since(0.0)
         frozen_at_m = before[-1][1]
-        # where the pull started: the stage's last rest before it (after taking up slack)
-        start_m = next(s[1] for s in reversed(before) if s[2] == 0.0)
         time.sleep(FROZEN_S)
         during = watch.since(frozen_s)
         os.kill(supervisor.pid, signal.SIGCONT)
@@ -124,6 +130,7 @@ def test_a_frozen_supervisor_stops_the_pull_and_its_trial_ends_aborted(ros, tmp_
             os.kill(supervisor.pid, signal.SIGCONT)
         stack.stop(reason='test over')
         client.destroy_node()
+    start_m = pull_start_m(bag)
     bound_m = start_m + TRAVEL_MM * 1e-3
     furthest_m = max(s[1] for s in during)
     rest = next(s for s in during if s[2] == 0.0)
