@@ -191,6 +191,11 @@ def heartbeat_source_pid(frame_id: str) -> int | None:
     """The process a heartbeat came from (None for a frame_id without one)."""
     _, sep, pid = frame_id.rpartition('@')
     return int(pid) if sep and pid.isdigit() else None
+def world_status_name(node_name: str = SIM_WORLD_NODE) -> str:
+    """The simulated world's status on /diagnostics (time_s, phase, the robot's conditions)."""
+    return f'{node_name}: world'
+
+
 DIAGNOSTICS = Topic('diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', STATUS_QOS,
                     f'{SIM_WORLD_NODE}, the device nodes, {SUPERVISOR_NODE}',
                     '1 Hz and on every state change; a status name starts with its node name')

@@ -189,6 +189,11 @@ class ForceBlock:
     first_index: Optional[int] = None    # index of the first sample since start() (DAQ reads)
     overrun: bool = False                 # samples were lost before this block
 
+    @property
+    def end_s(self) -> float:
+        """The time one period after its last sample, s: where the next block starts."""
+        return self.t0_s + self.period_s * self.force_n.size
+
 
 class ForceDaq(Device):
     max_sample_rate_hz: float

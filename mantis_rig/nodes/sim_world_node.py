@@ -124,7 +124,7 @@ class SimWorldNode(WithoutDefaultEventHandlers, Node):
             block = force_block_from_msg(msg)
         except (ValueError, IndexError):      # not a force block: nothing to pace by
             return
-        self._daq_end_s = block.t0_s + block.period_s * block.force_n.size
+        self._daq_end_s = block.end_s
         self._daq_heard = time.monotonic()
 
     def _on_progress(self, msg: Header) -> None:
@@ -172,7 +172,7 @@ class SimWorldNode(WithoutDefaultEventHandlers, Node):
         failure = self.runner.failure
         status = DiagnosticStatus(
             level=DiagnosticStatus.ERROR if failure else DiagnosticStatus.OK,
-            name=f'{self.get_name()}: world', hardware_id=self.get_name(),
+            name=contract.world_status_name(self.get_name()), hardware_id=self.get_name(),
             message=f'stopped: {failure}' if failure else f'running, phase {values["phase"]}',
             values=[KeyValue(key=k, value=v) for k, v in values.items()])
         array = DiagnosticArray(status=[status])

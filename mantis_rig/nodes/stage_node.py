@@ -262,7 +262,7 @@ class StageNode(DeviceNode):
         if trip is not None:
             self._report_trip(trip)
         if self.is_active:
-            self._guard_progress.report(block.t0_s + block.period_s * block.force_n.size)
+            self._guard_progress.report(block.end_s)
 
     def _report_trip(self, trip) -> None:
         """A force-guard trip (over the ceiling, or readings gone stale) is not a device fault:

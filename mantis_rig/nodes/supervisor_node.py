@@ -51,7 +51,6 @@ from .rig_client import RigClient
 
 NODE_NAME = contract.SUPERVISOR_NODE
 STATUS_NAME = f'{NODE_NAME}: trial'
-WORLD_STATUS_NAME = f'{contract.SIM_WORLD_NODE}: world'     # the simulated world's status
 
 LOG_WRITE_FAILED = 'log write failed'     # how the abort reason of a failed log begins
 LOG_TAIL_WAIT_S = 2.0
@@ -388,7 +387,7 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
     def _on_diagnostics(self, msg) -> None:
         sequence = self.sequence
         for status in msg.status:
-            if status.name == WORLD_STATUS_NAME:
+            if status.name == contract.world_status_name():
                 if sequence is not None:
                     values = {kv.key: kv.value for kv in status.values}
                     sequence.on_world_status(float(values.get('time_s', 'nan')), values)

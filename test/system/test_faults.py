@@ -15,6 +15,7 @@ import re
 import time
 
 from fault_injection import Case, run_case
+from polling import wait_until
 import pytest
 
 from mantis_rig.hardware.kdc101 import Kdc101Stage
@@ -106,11 +107,3 @@ def test_a_kdc101_whose_node_process_is_gone_is_stopped_at_its_port(make_emulato
     time.sleep(0.3)
     assert emu.position_mm == at
 
-
-def wait_until(condition, timeout_s=5.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.02)
-    return False

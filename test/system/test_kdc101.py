@@ -14,6 +14,7 @@ from fakes.kdc101_emulator import (
     fds_open_on,
 )
 import numpy as np
+from polling import wait_until
 import pytest
 import serial
 
@@ -73,14 +74,6 @@ def assert_link_closed(stage, emulator=None):
     if emulator is not None:       # the driver's fd on the pty is closed, not just forgotten
         assert len(fds_open_on(emulator.port)) == 1, 'the driver left its port fd open'
 
-
-def wait_until(condition, timeout_s=5.0):
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.02)
-    return False
 
 
 # --- unit conversions -----------------------------------------------------------------------

@@ -23,6 +23,7 @@ import time
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState
 import numpy as np
+import polling
 import pytest
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -78,10 +79,7 @@ class StageWatch:
 
 
 def wait_until(condition, what, timeout_s=120.0):
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        assert time.monotonic() < deadline, f'timed out waiting for {what}'
-        time.sleep(0.01)
+    assert polling.wait_until(condition, timeout_s, poll_s=0.01), f'timed out waiting for {what}'
 
 
 def pull_start_m(bag: Path) -> float:
