@@ -389,8 +389,7 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
         for status in msg.status:
             if status.name == contract.world_status_name():
                 if sequence is not None:
-                    values = {kv.key: kv.value for kv in status.values}
-                    sequence.on_world_status(float(values.get('time_s', 'nan')), values)
+                    sequence.on_world_status({kv.key: kv.value for kv in status.values})
                 continue
             device = next((d for d in DEVICE_NODES
                            if d in status.name or d == status.hardware_id), None)

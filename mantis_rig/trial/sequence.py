@@ -84,6 +84,14 @@ RELATCH_REASON = 're-latch the robot, then start the next trial'
 WORLD_CONDITION_NAMES = tuple(spec.name for spec in WORLD_CONDITIONS)
 
 
+def _number(text) -> float:
+    """A number a status printed; NaN for a missing or unreadable one (matches nothing)."""
+    try:
+        return float(text)
+    except (TypeError, ValueError):
+        return math.nan
+
+
 class SessionState:
     """What one bring-up's trials hand on to the next (the supervisor owns it): where the
     trials start, and which devices reported an ERROR (a latched force-guard trip, a fault)
@@ -309,19 +317,22 @@ class TrialSequence:
                 (min(span[0], first_s), max(span[1], last_s))
             self.marker_frames += n_frames
 
-    def on_world_status(self, time_s: float, conditions: dict) -> None:
-        """The simulated world's status at rig time ``time_s``: the conditions its current
-        robot was built at (WORLD_CONDITION_NAMES; numbers as its diagnostics print them)."""
+    def on_world_status(self, status: dict) -> None:
+        """The simulated world's status (its diagnostics' values, as printed): ``time_s``, its
+        rig time, and the conditions its current robot was built at (WORLD_CONDITION_NAMES).
+        A value missing or unreadable matches nothing."""
         if not self._world_asked or self.world_built_s is not None:
             return
         for name in WORLD_CONDITION_NAMES:
-            wanted, built = getattr(self.conditions, name), conditions.get(name)
+            wanted, built = getattr(self.conditions, name), status.get(name)
             if isinstance(wanted, str):
                 if built != wanted:
                     return
-            elif built is None or not math.isclose(float(built), wanted, rel_tol=1e-5):
+            elif not math.isclose(_number(built), wanted, rel_tol=1e-5):
                 return
-        self.world_built_s = time_s
+        time_s = _number(status.get('time_s'))
+        if math.isfinite(time_s):
+            self.world_built_s = time_s
 
     def on_device_message(self, node: str, message: str, in_error: bool = False) -> None:
         self.device_messages[node] = message

@@ -124,8 +124,8 @@ class FakeRig:
         if node in self.refuse:
             return Pending((False, self.refuse[node]), done=True)
         if node == SIM_WORLD_NODE:          # the world's status: the robot at them, now
-            self.seq.on_world_status(self.t, {k: f'{v:g}' if isinstance(v, float) else v
-                                              for k, v in values.items()})
+            self.seq.on_world_status({'time_s': f'{self.t:.4f}', **{
+                k: f'{v:g}' if isinstance(v, float) else v for k, v in values.items()}})
         return Pending((True, ''), done=True)
 
     def move_at(self, v):
@@ -314,7 +314,8 @@ class BuildsTheRobotLate(FakeRig):
         super().step(dt)
         if self.built is not None and self.t >= self.build_at_s:
             values, self.built = self.built, None
-            self.seq.on_world_status(self.t, {k: str(v) for k, v in values.items()})
+            status = {k: str(v) for k, v in values.items()}
+            self.seq.on_world_status({'time_s': str(self.t), **status})
 
 
 def test_the_force_step_of_a_robot_built_late_is_not_taken_for_the_release():
@@ -324,6 +325,21 @@ def test_the_force_step_of_a_robot_built_late_is_not_taken_for_the_release():
     assert pulling_s >= rig.build_at_s
     # the release 3 mm into the pull, at 2.33 mm/s: not the step when the robot was built
     assert float(outcome['release_time_s']) - pulling_s == pytest.approx(3 / 2.33, abs=0.05)
+
+
+def test_a_garbled_world_status_matches_nothing_and_breaks_nothing():
+    class GarblesFirst(FakeRig):
+        def set_parameters(self, node, values):
+            if node == SIM_WORLD_NODE:
+                for garbled in ({'time_s': 'soon', **{k: str(v) for k, v in values.items()}},
+                                {'time_s': '1.0', 'd_t_mm': 'wide', 'medium': None}, {}):
+                    self.seq.on_world_status(garbled)
+                assert self.seq.world_built_s is None
+            return super().set_parameters(node, values)
+
+    rig, seq, outcome = run_trial(GarblesFirst())
+    assert outcome['result'] == 'completed', outcome
+    assert seq.world_built_s is not None
 
 
 def test_a_lost_answer_from_the_simulated_world_is_asked_for_again(monkeypatch):
