@@ -14,6 +14,7 @@ from pathlib import Path
 import threading
 import time
 
+import polling
 import pytest
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
@@ -190,7 +191,9 @@ def test_conditions_the_world_cannot_apply_end_the_trial_with_the_reason(ros, tm
         assert ok, message
         assert client.wait_for_state(('pulling', 'done', 'aborted'), client.trial_start,
                                      60.0) == 'pulling'
-        # the robot a trial pulls on cannot be swapped; the values it has can be set
+        # the robot a trial pulls on cannot be swapped; the values it has can be set (the
+        # world may be held at the pull's first instant: wait for the stage to move)
+        assert polling.wait_until(lambda: world.stage_velocity_m_per_s() > 0, 60.0)
         refused, same = set_parameters(client, SIM_WORLD_NODE,
                                        {'d_t_mm': 19.0, 'contact_angle_deg': 5.0})
         assert not refused.successful
