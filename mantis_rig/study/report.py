@@ -17,7 +17,7 @@ from mantis_sim.studies.rig_study.quantities import QUANTITIES, condition_axis
 from mantis_sim.studies.shared.csv_table import write_rows
 
 from .record import ABORTED, DONE, INTERRUPTED, OWED, RECORD_NAME, read_record
-from .runner import plan_as_run, study_forecaster
+from .runner import plan_as_run, recorded_conditions, study_forecaster
 
 REPORT = 'report'
 EFFECT_COLUMNS = ('factor', 'reference', 'level', 'quantity', 'unit', 'measured', 'low_95',
@@ -29,13 +29,14 @@ def write_report(directory: Path, say=print, forecaster=None, plan=None) -> Path
     directory = Path(directory)
     record = read_record(directory / RECORD_NAME)
     plan = plan or plan_as_run(directory)
-    forecaster = forecaster or study_forecaster(directory, plan, say=say)
+    forecaster = forecaster or study_forecaster(directory, plan, record.rows, say=say)
     out = directory / REPORT
     out.mkdir(exist_ok=True)
     done = [r for r in record.rows if r['status'] == DONE]
     per_cell = Counter(tuple(str(r[f]) for f in plan.factors) for r in done)
     repeats_run = min(per_cell.values()) if len(per_cell) == len(plan.cells) else 0
-    effects = study_effects(plan, done, forecaster, repeats_run)
+    effects = study_effects(plan, done, forecaster, repeats_run, planned=record.rows,
+                            conditions_of=recorded_conditions(record.rows, forecaster.scene))
     write_rows(out / 'effects.csv', [_effect_row(e) for e in effects], EFFECT_COLUMNS)
     figures = [forecast_run_order(record.rows, out / 'forecast_run_order.png'),
                effects_figure(effects, out / 'effects.png'),
@@ -96,7 +97,7 @@ def _markdown(plan, rows, effects, figures) -> str:
              f'order {plan.order}, {plan.repeats} repeat(s) per '
              f'combination, seed {plan.seed}; the twin: scene {plan.scene}, {plan.robots} '
              f'robots per combination.', '', '## Effects (95 % intervals)', '',
-             '| change | quantity | measured | twin\'s forecast | resolved | twin inside | '
+             '| change | quantity | measured | twin\'s forecast | resolved | inside the twin\'s | '
              'more repeats |', '|---|---|---|---|---|---|---|']
     for e in effects:
         q = QUANTITIES[e.quantity]

@@ -46,6 +46,10 @@ class ClientRig:
     def conditions(self) -> dict:
         return self.client.get_parameters(CONDITION_KEYS)
 
+    def backend(self) -> str:
+        """'sim' or 'hardware': which measuring chain the rig's trials go through."""
+        return str(self.client.get_parameters(['backend']).get('backend') or 'hardware')
+
     def start(self) -> Path:
         ok, message = self.client.start_trial()
         if not ok:

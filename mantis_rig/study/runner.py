@@ -23,13 +23,14 @@ from typing import Optional, Protocol
 
 import yaml
 
+from mantis_sim.conditions import conditions_of_scene
 from mantis_sim.errors import InputError
 from mantis_sim.scene import load_scene
 from mantis_sim.studies.rig_study.effects import auto_repeats
 from mantis_sim.studies.rig_study.forecast import DAY_QUANTITY, StudyForecaster
 from mantis_sim.studies.rig_study.judge import judge
 from mantis_sim.studies.rig_study.plan import CONDITION_KEYS, StudyPlan, plan_from_mapping
-from mantis_sim.studies.rig_study.quantities import QUANTITIES
+from mantis_sim.studies.rig_study.quantities import MEASUREMENT, QUANTITIES
 
 from ..recording import TRIAL_OUTCOME, BagReader
 from .record import (
@@ -52,6 +53,7 @@ from .record import (
 PLAN_AS_RUN = 'plan.yaml'
 BAGS = 'bags'
 ENSEMBLES = 'forecast_ensembles.pkl'     # the twin's robots at each combination, simulated once
+RIG = 'rig.yaml'            # the rig the study ran on: its backend, whose measuring chain it is
 
 
 class StudyError(InputError):
@@ -61,6 +63,7 @@ class StudyError(InputError):
 class RigPort(Protocol):
     def set_conditions(self, values: dict) -> None: ...     # the supervisor's parameters
     def conditions(self) -> dict: ...               # its trial conditions (CONDITION_KEYS)
+    def backend(self) -> str: ...                   # 'sim' or 'hardware' (its measuring chain)
     def start(self) -> Path: ...                            # the new trial's bag directory
     def follow(self, on_state: Callable[[str], None]) -> tuple[str, str]: ...  # (final, reason)
 
@@ -97,7 +100,10 @@ class StudyRunner:
         self.say, self.progress = say, progress
         self.record: Optional[StudyRecord] = None
         self.forecaster: Optional[StudyForecaster] = None
-        self._ensembles: dict = {}
+        self._ensembles: dict = {}     # conditions key -> Future of its Ensemble, in order asked
+        self._ensembles_saved = 0
+        self._cached: dict = {}
+        self._rig_conditions: dict = {}
         self._measuring: dict = {}      # id(row) -> (row, Future)
         self.current: Optional[dict] = None
         self._judged_all = False
@@ -194,43 +200,70 @@ class StudyRunner:
         self.record.insert_after(row, repeat_of(row))
 
     # ------------------------------------------------------------------ the forecasts
+    def conditions_of(self, row: dict) -> dict:
+        """The conditions a row ran at (the rig's for what the plan leaves open), or, for a row
+        not yet run, those it will run at as far as the rig's now say."""
+        return {**self._rig_conditions, **_conditions(row)}
+
     def _start_ensembles(self) -> None:
-        cached = load_ensembles(self.directory)
+        scene = load_scene(self.plan.scene, list(self.setup.scene_overrides))
+        self._rig_conditions = conditions_of_scene(scene)
+        if self.rig is not None:
+            self._rig_conditions.update(self.rig.conditions())
+            write_atomically(self.directory / RIG,
+                             yaml.safe_dump({'backend': self.rig.backend()}))
+        self._cached = load_ensembles(self.directory)
         for cell in self.plan.cells:
-            conditions = self.plan.conditions_of(cell)
-            key = _cell_key(conditions)
-            if key in cached:
-                self._ensembles[key] = _done(cached[key])
-            else:
-                self._ensembles[key] = self.analyst.ensemble(
-                    self.plan.scene, list(self.setup.scene_overrides), conditions,
-                    self.plan.robots, self.plan.seed, self.setup.slack_force_N)
+            self._ask_ensemble({**self._rig_conditions, **self.plan.conditions_of(cell)})
+
+    def _ask_ensemble(self, conditions: dict) -> None:
+        key = _cell_key(conditions)
+        if key in self._ensembles:
+            return
+        if key in self._cached:
+            self._ensembles[key] = _done(self._cached[key])
+        else:
+            self._ensembles[key] = self.analyst.ensemble(
+                self.plan.scene, list(self.setup.scene_overrides), conditions,
+                self.plan.robots, self.plan.seed, self.setup.slack_force_N)
 
     def _forecaster(self, wait: bool = True) -> Optional[StudyForecaster]:
+        """The forecaster, with every ensemble asked for so far (None, without ``wait``, while
+        one is still being simulated)."""
+        futures = list(self._ensembles.values())
+        if not wait and not all(f.done() for f in futures):
+            return None
+        ensembles = [f.result() for f in futures]
         if self.forecaster is None:
-            futures = list(self._ensembles.values())
-            if not wait and not all(f.done() for f in futures):
-                return None
             scene = load_scene(self.plan.scene, list(self.setup.scene_overrides))
-            ensembles = [f.result() for f in futures]
+            self.forecaster = StudyForecaster(scene, ensembles, self.plan.seed,
+                                              measurement_of(self.directory))
+        elif len(ensembles) > self._ensembles_saved:
+            for ensemble in ensembles[self._ensembles_saved:]:
+                self.forecaster.add(ensemble)
+            self._judged_all = False         # the rows that waited for them are judged now
+        if len(ensembles) > self._ensembles_saved:
             save_ensembles(self.directory, ensembles)
-            self.forecaster = StudyForecaster(scene, ensembles, self.plan.seed)
+            self._ensembles_saved = len(ensembles)
         return self.forecaster
 
     def judge(self, arrived: list, every_row: bool) -> None:
         """Judge the rows whose measurements have just ``arrived`` (every row the first time
         the forecasts are there, and with ``every_row``): a trial's forecast depends only on
         the day's earlier ones, so judging each as it lands keeps a long study's cost per
-        trial flat."""
+        trial flat. A row that ran at conditions no ensemble was simulated at (the rig's,
+        set outside the plan) gets one first."""
+        for row in self.record.rows:
+            self._ask_ensemble(self.conditions_of(row))
         forecaster = self._forecaster(wait=every_row)
         if forecaster is None:
             return
         if every_row or not self._judged_all:
-            judge_rows(self.record.rows, forecaster)
+            judge_rows(self.record.rows, forecaster, self.conditions_of)
             self._judged_all = True
         else:
             for row in arrived:
-                judge_row(self.record.rows, row, forecaster)
+                judge_row(self.record.rows, row, forecaster, self.conditions_of)
 
     # ------------------------------------------------------------------ measuring
     def _measure_unmeasured(self) -> None:
@@ -356,41 +389,52 @@ def _conditions(row: dict) -> dict:
     return {k: row[k] for k in CONDITION_KEYS if row.get(k) is not None}
 
 
-def _day_strike(row: dict) -> Optional[tuple]:
+def _day_strike(row: dict, conditions_of) -> Optional[tuple]:
     """(conditions, DAY_QUANTITY) of a row that measured it, else None."""
     value = row.get(DAY_QUANTITY)
     if row['status'] == DONE and value is not None and math.isfinite(value):
-        return _conditions(row), value
+        return conditions_of(row), value
     return None
 
 
-def _judge(row: dict, earlier: list, forecaster: StudyForecaster) -> None:
-    forecast = forecaster.forecast(_conditions(row), earlier)
+def recorded_conditions(rows: list, scene) -> Callable[[dict], dict]:
+    """row -> the conditions it ran at, for a study read back from its record: its own, and for
+    a row not yet run those the study's latest run row recorded for what the plan leaves
+    open (the rig's), else the scene's."""
+    ran = [r for r in rows if all(r.get(k) is not None for k in CONDITION_KEYS)]
+    base = {k: ran[-1][k] for k in CONDITION_KEYS} if ran else conditions_of_scene(scene)
+    return lambda row: {**base, **_conditions(row)}
+
+
+def _judge(row: dict, earlier: list, forecaster: StudyForecaster, conditions_of) -> None:
+    forecast = forecaster.forecast(conditions_of(row), earlier)
     verdict = judge(forecast, {q: row.get(q) for q in QUANTITIES})
     row.update(verdict.values)
     row.update(flags=' '.join(verdict.flagged), cause=verdict.cause,
                day_strikes=forecast.day_strikes)
 
 
-def judge_rows(rows: list, forecaster: StudyForecaster) -> None:
-    """Every row's forecast, from the day's earlier measured strikes, and its judgement
-    (rows in run order; a row not yet run is forecast as of today)."""
+def judge_rows(rows: list, forecaster: StudyForecaster, conditions_of=None) -> None:
+    """Every row's forecast at its conditions (``conditions_of(row)``; default: those it
+    records), from the day's earlier measured strikes, and its judgement (rows in run order; a
+    row not yet run is forecast as of today)."""
+    conditions_of = conditions_of or recorded_conditions(rows, forecaster.scene)
     today = day_of(datetime.now(UTC))
     by_day: dict = {}
     for row in rows:
         earlier = by_day.setdefault(row.get('day') or today, [])
-        _judge(row, list(earlier), forecaster)
-        strike = _day_strike(row)
+        _judge(row, list(earlier), forecaster, conditions_of)
+        strike = _day_strike(row, conditions_of)
         if strike is not None:
             earlier.append(strike)
 
 
-def judge_row(rows: list, row: dict, forecaster: StudyForecaster) -> None:
+def judge_row(rows: list, row: dict, forecaster: StudyForecaster, conditions_of) -> None:
     """One row's forecast and judgement, from the earlier rows of its day (what a trial that
     has just been measured needs: the rows after it are judged at the study's end)."""
     earlier = [strike for r in rows[:rows.index(row)] if r.get('day') == row.get('day')
-               for strike in [_day_strike(r)] if strike is not None]
-    _judge(row, earlier, forecaster)
+               for strike in [_day_strike(r, conditions_of)] if strike is not None]
+    _judge(row, earlier, forecaster, conditions_of)
 
 
 def plan_as_run(directory: Path) -> StudyPlan:
@@ -428,23 +472,40 @@ def save_ensembles(directory: Path, ensembles: list) -> None:
     os.replace(tmp, path)
 
 
-def study_forecaster(directory: Path, plan: StudyPlan, scene_overrides=(),
+def study_forecaster(directory: Path, plan: StudyPlan, rows: list, scene_overrides=(),
                      slack_force_N: float = 0.3, say=print) -> StudyForecaster:
-    """The forecaster of a study's directory: its saved ensembles, any missing simulated."""
+    """The forecaster of a study's directory: an ensemble at each combination of the plan and
+    at the conditions of each of its record's ``rows``, the saved ones, any missing
+    simulated."""
     from mantis_sim.studies.rig_study.forecast import simulate_ensemble
     cached = load_ensembles(directory)
     scene = load_scene(plan.scene, list(scene_overrides))
+    conditions_of = recorded_conditions(rows, scene)
+    wanted = {}
+    for conditions in [conditions_of(plan.conditions_of(c)) for c in plan.cells] + \
+            [conditions_of(r) for r in rows]:
+        wanted.setdefault(_cell_key(conditions), conditions)
     ensembles = []
-    for cell in plan.cells:
-        conditions = plan.conditions_of(cell)
-        ensemble = cached.get(_cell_key(conditions))
+    for key, conditions in wanted.items():
+        ensemble = cached.get(key)
         if ensemble is None:
             say(f'simulating the twin\'s {plan.robots} robots at {conditions}')
             ensemble = simulate_ensemble(scene, conditions, plan.robots, plan.seed,
                                          slack_force_N=slack_force_N)
         ensembles.append(ensemble)
     save_ensembles(directory, ensembles)
-    return StudyForecaster(scene, ensembles, plan.seed)
+    return StudyForecaster(scene, ensembles, plan.seed, measurement_of(directory))
+
+
+def measurement_of(directory: Path) -> dict:
+    """The measuring chain of the rig a study ran on (quantities.MEASUREMENT), from DIR/rig.yaml
+    (the real rig's where it is missing or unreadable: the wider)."""
+    try:
+        backend = (yaml.safe_load((directory / RIG).read_text(encoding='utf-8')) or {}).get(
+            'backend')
+    except (OSError, yaml.YAMLError, AttributeError):
+        backend = None
+    return MEASUREMENT.get(backend, MEASUREMENT['hardware'])
 
 
 def _done(value) -> Future:
@@ -463,8 +524,13 @@ def _relative(path: Optional[Path], directory: Path) -> Optional[str]:
 
 
 def _cell_key(conditions: dict) -> tuple:
-    return tuple(sorted((k, str(v)) for k, v in conditions.items()))
+    return tuple(sorted((k, _key_value(v)) for k, v in conditions.items()))
+
+
+def _key_value(value) -> str:
+    return f'{float(value):.9g}' if isinstance(value, (int, float)) else str(value)
 
 
 __all__ = ['BAGS', 'Operator', 'PLAN_AS_RUN', 'RigPort', 'StudyError', 'StudyRunner',
-           'StudySetup', 'judge_row', 'judge_rows', 'plan_as_run', 'study_forecaster', 'video_name']
+           'StudySetup', 'judge_row', 'judge_rows', 'plan_as_run', 'recorded_conditions',
+           'study_forecaster', 'video_name']

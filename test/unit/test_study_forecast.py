@@ -16,7 +16,7 @@ from mantis_sim.studies.rig_study.forecast import (
 )
 from mantis_sim.studies.rig_study.judge import judge
 from mantis_sim.studies.rig_study.plan import plan_from_mapping
-from mantis_sim.studies.rig_study.quantities import MEASUREMENT_ERROR
+from mantis_sim.studies.rig_study.quantities import RIG_ERROR
 
 CONDITIONS = {'d_t_mm': 23.0, 'pull_speed_mm_s': 2.3}
 
@@ -73,7 +73,7 @@ def test_forecasts_of_strikes_drawn_as_the_twin_draws_them_are_calibrated(twin):
             truth = robot_quantities((scene.with_values(
                 {'geometry.d_t_mm': 23.0, 'drive.pull_speed_mm_per_s': 2.3,
                  'geometry.latch_offset_deg': seat}), {}, 0.3, rng.uniform()))
-            value = truth[DAY_QUANTITY] * (1 + MEASUREMENT_ERROR[DAY_QUANTITY]
+            value = truth[DAY_QUANTITY] * (1 + RIG_ERROR[DAY_QUANTITY].sd
                                            * rng.normal())
             forecast = forecaster.forecast(CONDITIONS, earlier)
             low, high = forecast.quantile(DAY_QUANTITY, [0.1, 0.9])

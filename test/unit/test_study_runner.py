@@ -11,9 +11,9 @@ from mantis_rig.recording import BagWriter
 from mantis_rig.study.record import read_record
 from mantis_rig.study.runner import StudyError, StudyRunner, StudySetup
 from mantis_sim.scene import load_scene
-from mantis_sim.studies.rig_study.forecast import simulate_ensemble
+from mantis_sim.studies.rig_study.forecast import StudyForecaster, simulate_ensemble
 from mantis_sim.studies.rig_study.plan import plan_from_mapping
-from mantis_sim.studies.rig_study.quantities import QUANTITIES
+from mantis_sim.studies.rig_study.quantities import QUANTITIES, SIMULATED_RIG_ERROR
 
 PLAN = {'scene': 'air_23mm_rig', 'factors': {'d_t_mm': [19, 25], 'pull_speed_mm_s': [1.0, 2.3]},
         'repeats': 2, 'order': 'random', 'seed': 5, 'robots': 20}
@@ -59,8 +59,8 @@ class Stop(BaseException):
 class FakeRig:
     conditions_of = {}
 
-    def __init__(self, abort=(), stop_at=None):
-        self.abort, self.stop_at = set(abort), stop_at
+    def __init__(self, abort=(), stop_at=None, defaults=RIG_DEFAULTS):
+        self.abort, self.stop_at, self.defaults = set(abort), stop_at, dict(defaults)
         self.started = []           # (trial's conditions) in the order they ran
         self._values = {}
 
@@ -68,14 +68,17 @@ class FakeRig:
         self._values = dict(values)
 
     def conditions(self):
-        return {**RIG_DEFAULTS, **{k: v for k, v in self._values.items() if k in RIG_DEFAULTS}}
+        return {**self.defaults, **{k: v for k, v in self._values.items() if k in self.defaults}}
+
+    def backend(self):
+        return 'sim'
 
     def start(self) -> Path:
         n = len(self.started) + 1
         bag = Path(self._values['out']) / f'trial_{n:03d}'
         bag.mkdir()
         self.started.append(dict(self._values))
-        FakeRig.conditions_of[bag.name] = dict(self._values)
+        FakeRig.conditions_of[bag.name] = {**self.conditions(), **self._values}
         return bag
 
     def follow(self, on_state):
@@ -124,6 +127,27 @@ def test_every_planned_trial_runs_once_with_its_forecast(tmp_path):
             assert 0.0 <= row[f'{name}_pit'] <= 1.0
     assert [r['day_strikes'] for r in rows] == list(range(8))    # the day's earlier strikes
     assert (tmp_path / 'study' / 'plan.yaml').exists()
+
+
+def test_a_trial_is_forecast_at_the_rigs_conditions_the_plan_left_open(tmp_path):
+    """A rig whose guide distance was set to 19 mm outside the plan (`mantis start --set
+    d_t_mm=19`), a plan of pull speeds only: every row records 19 mm and is forecast at it."""
+    rig = FakeRig(defaults={**RIG_DEFAULTS, 'd_t_mm': 19.0})
+    plan = {'scene': 'air_23mm_rig', 'factors': {'pull_speed_mm_s': [1.5, 2.3]}, 'repeats': 2,
+            'order': 'as-listed', 'seed': 5, 'robots': 20}
+    _runner(tmp_path, rig, plan).run()
+    rows = _record(tmp_path).rows
+    assert [r['d_t_mm'] for r in rows] == [19.0] * 4
+    scene = load_scene('air_23mm_rig')
+    at = {}
+    for d_t in (19.0, 23.0):
+        conditions = {**RIG_DEFAULTS, 'd_t_mm': d_t, 'pull_speed_mm_s': 1.5}
+        forecaster = StudyForecaster(scene, [simulate_ensemble(scene, conditions, 20, 5)], 5,
+                                     SIMULATED_RIG_ERROR)
+        at[d_t] = forecaster.forecast(conditions).quantiles('loading_work_mJ')['q50']
+    assert rows[0]['day_strikes'] == 0
+    assert rows[0]['loading_work_mJ_q50'] == pytest.approx(at[19.0], rel=1e-9)
+    assert abs(at[19.0] - at[23.0]) > 0.1 * at[23.0]         # the test tells them apart
 
 
 def test_an_abort_is_repeated_at_the_end_of_its_block_twice_at_most(tmp_path):

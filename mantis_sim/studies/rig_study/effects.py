@@ -5,18 +5,20 @@ The measured effect of a factor's level is its difference from the factor's firs
 a main-effects least-squares fit over every strike (a dummy per level of every factor besides
 its first): on a balanced plan that is the difference of the two levels' means, and strikes
 lost to aborts leave it unbiased. Its 95 % interval is Student's t on the fit's residual
-degrees of freedom. The twin's effect is the same difference of the ensembles' means (a new
-day's weights; the cells weighed equally), its interval the 2.5-97.5 % of a bootstrap over the
-ensemble's robots, resampled together at every combination.
+degrees of freedom. The twin's effect is its forecast of what that same fit of the study's own
+strikes will give (effect_forecast: this day's robot as the study's strikes tell it, the
+study's repeats, the measurement's error): the median and the 2.5-97.5 % of its replays.
 
 A difference delta is seen (two-sided test at the 5 % level, 80 % power) with
 n >= 2 (z_0.975 + z_0.8)^2 sd^2 / delta^2 strikes at each level
 (mantis_sim.studies.design.spread_effects.strikes_needed); a level of a factor gathers
-(combinations / levels) strikes per repeat.
+(combinations / levels) strikes per repeat. An effect left unresolved by as many repeats as
+that asks for was the 20 % that such a study misses: one more repeat at least is advised, never
+none.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 import math
 
@@ -24,11 +26,11 @@ import numpy as np
 
 from mantis_sim.studies.design.spread_effects import strikes_needed
 
+from .effect_forecast import replay_values, replayed_effects
 from .forecast import StudyForecaster
-from .plan import StudyPlan
+from .plan import CONDITION_KEYS, StudyPlan
 from .quantities import QUANTITIES
 
-BOOTSTRAP = 200
 MIN_REPEATS = 2
 
 
@@ -46,8 +48,9 @@ class Effect:
     twin: float                 # the twin's forecast of the same difference
     twin_low: float
     twin_high: float
-    more_repeats: float         # repeats beyond those run that would resolve it (0: resolved;
-    #                             inf: no difference to resolve is forecast or planned)
+    more_repeats: float         # repeats beyond those run that would resolve it (0: resolved,
+    #                             at least 1 otherwise; inf: no difference to resolve is
+    #                             forecast or planned)
 
     @property
     def resolved(self) -> bool:
@@ -55,8 +58,9 @@ class Effect:
 
     @property
     def twin_inside(self) -> bool:
-        """Whether the twin's forecast lies in the measured 95 % interval."""
-        return math.isfinite(self.low) and self.low <= self.twin <= self.high
+        """Whether the measured effect lies in the twin's 95 % forecast of it (the twin right
+        about it, as far as this study can tell)."""
+        return math.isfinite(self.measured) and self.twin_low <= self.measured <= self.twin_high
 
 
 def _design_matrix(plan: StudyPlan, rows: Sequence[Mapping]) -> tuple[np.ndarray, list]:
@@ -106,26 +110,25 @@ def measured_effects(plan: StudyPlan, rows: Sequence[Mapping], quantity: str) ->
 
 
 def twin_effects(plan: StudyPlan, forecaster: StudyForecaster, quantity: str,
+                 rows: Sequence[Mapping], conditions_of: Callable = None,
                  seed: int = 0) -> dict:
-    """(factor, level) -> (effect, 2.5 %, 97.5 %) of the twin's new-day forecasts."""
-    cells = plan.cells
-    ensembles = [forecaster.ensemble(plan.conditions_of(c)) for c in cells]
-    weights = [forecaster.belief.new_day_weights(e) for e in ensembles]
-    values = [e.values[quantity] for e in ensembles]
-    rng = np.random.default_rng(seed)
-    n = len(values[0])
-    picks = [np.arange(n)] + [rng.integers(0, n, n) for _ in range(BOOTSTRAP)]
-    means = np.array([[_weighted_mean(v[p], w[p]) for v, w in zip(values, weights)]
-                      for p in picks])          # (1 + BOOTSTRAP, cells)
+    """(factor, level) -> (effect, 2.5 %, 97.5 %): the twin's forecast of what the fit of
+    ``rows`` (the study's strikes, each at its conditions and day) will measure
+    (effect_forecast)."""
+    conditions_of = conditions_of or row_conditions
+    x, names = _design_matrix(plan, rows)
+    values = replay_values(forecaster, rows, quantity, conditions_of, seed=seed)
+    effects = replayed_effects(x, values)
     out = {}
-    for factor, levels in plan.factors.items():
-        ref = [i for i, c in enumerate(cells) if _same(c[factor], levels[0])]
-        for level in levels[1:]:
-            at = [i for i, c in enumerate(cells) if _same(c[factor], level)]
-            diff = means[:, at].mean(axis=1) - means[:, ref].mean(axis=1)
-            low, high = np.nanquantile(diff[1:], [0.025, 0.975])
-            out[(factor, level)] = (float(diff[0]), float(low), float(high))
+    for k, name in enumerate(names, start=1):
+        low, mid, high = np.nanquantile(effects[:, k], [0.025, 0.5, 0.975])
+        out[name] = (float(mid), float(low), float(high))
     return out
+
+
+def row_conditions(row: Mapping) -> dict:
+    """The conditions a row records (the forecaster takes the scene's for any it leaves out)."""
+    return {k: row[k] for k in CONDITION_KEYS if row.get(k) is not None}
 
 
 def _weighted_mean(v: np.ndarray, w: np.ndarray) -> float:
@@ -134,15 +137,21 @@ def _weighted_mean(v: np.ndarray, w: np.ndarray) -> float:
 
 
 def study_effects(plan: StudyPlan, rows: Sequence[Mapping], forecaster: StudyForecaster,
-                  repeats_run: int) -> list[Effect]:
-    """Every factor level's effect on every quantity some row measured."""
+                  repeats_run: int, planned: Sequence[Mapping] = (),
+                  conditions_of: Callable = None) -> list[Effect]:
+    """Every factor level's effect on every quantity some row measured (``rows``: the done
+    ones). The twin forecasts the fit of the rows that measured it, or, where they cannot
+    give every effect yet, of the ``planned`` rows (the whole record)."""
     cells_per_level = {f: len(plan.cells) / len(levels) for f, levels in plan.factors.items()}
     effects = []
     for quantity in QUANTITIES:
         if not any(r.get(quantity) is not None and math.isfinite(r[quantity]) for r in rows):
             continue
         measured = measured_effects(plan, rows, quantity)
-        twin = twin_effects(plan, forecaster, quantity)
+        fitted = [r for r in rows if _finite(r.get(quantity))]
+        if not _identified(plan, fitted) and _identified(plan, planned):
+            fitted = list(planned)
+        twin = twin_effects(plan, forecaster, quantity, fitted, conditions_of)
         for (factor, level), (value, low, high, strikes, sd) in measured.items():
             t, t_low, t_high = twin[(factor, level)]
             effect = Effect(factor, level, plan.factors[factor][0], quantity, value, low, high,
@@ -154,11 +163,22 @@ def study_effects(plan: StudyPlan, rows: Sequence[Mapping], forecaster: StudyFor
     return effects
 
 
+def _identified(plan: StudyPlan, rows: Sequence[Mapping]) -> bool:
+    if not rows:
+        return False
+    x, _ = _design_matrix(plan, rows)
+    return int(np.linalg.matrix_rank(x)) == x.shape[1]
+
+
+def _finite(value) -> bool:
+    return value is not None and isinstance(value, (int, float)) and math.isfinite(value)
+
+
 def _forecast_difference(effect: Effect) -> float | None:
-    """The difference to resolve when the plan names none: the twin's, where the twin is sure
-    of it (its interval excludes zero) and it is at least a tenth of one strike's scatter."""
+    """The difference to resolve when the plan names none: the twin's, where it is at least a
+    tenth of one strike's scatter."""
     t = effect.twin
-    if not math.isfinite(t) or effect.twin_low <= 0 <= effect.twin_high:
+    if not math.isfinite(t) or t == 0.0:
         return None
     if math.isfinite(effect.residual_sd) and abs(t) < 0.1 * effect.residual_sd:
         return None
@@ -175,8 +195,8 @@ def _with_more_repeats(effect: Effect, delta, cells_per_level: float,
     needed = strikes_needed(delta, effect.residual_sd)
     if not math.isfinite(needed):
         return replace(effect, more_repeats=math.inf)
-    return replace(effect, more_repeats=max(0.0, math.ceil(needed / cells_per_level)
-                                            - repeats_run))
+    return replace(effect, more_repeats=float(max(1, math.ceil(needed / cells_per_level)
+                                                  - repeats_run)))
 
 
 def auto_repeats(plan: StudyPlan, forecaster: StudyForecaster) -> int:

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .effects import Effect
-from .quantities import QUANTITIES, condition_axis
+from .quantities import CONDITION_LABELS, QUANTITIES
 
 
 def _pyplot():
@@ -68,14 +68,22 @@ def _or_nan(value) -> float:
     return float(value) if _finite(value) else math.nan
 
 
+EFFECT_COLUMNS = 2
+
+
 def effects_figure(effects: Sequence[Effect], path: Path) -> Path | None:
+    """One panel per quantity in a grid of EFFECT_COLUMNS columns, each factor level's change
+    on a row of its own, at the type size of the study's other figures."""
     if not effects:
         return None
     plt = _pyplot()
     quantities = list(dict.fromkeys(e.quantity for e in effects))
-    fig, axes = plt.subplots(1, len(quantities), figsize=(4.2 * len(quantities), 3.6),
+    columns = min(EFFECT_COLUMNS, len(quantities))
+    rows = math.ceil(len(quantities) / columns)
+    per_panel = max(sum(e.quantity == q for e in effects) for q in quantities)
+    fig, axes = plt.subplots(rows, columns, figsize=(6.0 * columns, (1.4 + 0.6 * per_panel) * rows),
                              squeeze=False)
-    for ax, name in zip(axes[0], quantities):
+    for ax, name in zip(axes.flat, quantities):
         mine = [e for e in effects if e.quantity == name]
         y = np.arange(len(mine))
         ax.errorbar([e.measured for e in mine], y + 0.12,
@@ -83,19 +91,27 @@ def effects_figure(effects: Sequence[Effect], path: Path) -> Path | None:
                     fmt='o', color='black', capsize=3, label='measured (95 %)')
         ax.errorbar([e.twin for e in mine], y - 0.12,
                     xerr=_err([(e.twin, e.twin_low, e.twin_high) for e in mine]),
-                    fmt='s', color='tab:blue', capsize=3, label='twin\'s forecast')
+                    fmt='s', color='tab:blue', capsize=3, label='twin\'s forecast (95 %)')
         ax.axvline(0.0, color='grey', linewidth=0.8)
-        ax.set_yticks(y, [f'{condition_axis(e.factor)}: {e.reference:g} to {e.level:g}'
-                          if not isinstance(e.level, str) else
-                          f'{e.factor}: {e.reference} to {e.level}' for e in mine], fontsize=8)
+        ax.set_yticks(y, [_change_label(e) for e in mine])
+        ax.set_ylim(-0.6, len(mine) - 0.4)
         ax.set_xlabel(f'change in {QUANTITIES[name].axis}')
         ax.grid(alpha=0.3, axis='x')
-    axes[0, 0].legend(loc='best', fontsize=8)
+    for ax in axes.flat[len(quantities):]:
+        ax.set_visible(False)
+    axes[0, 0].legend(loc='best', fontsize=9)
     fig.suptitle('each factor\'s effect: the study\'s strikes beside the twin')
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def _change_label(e: Effect) -> str:
+    if isinstance(e.level, str):
+        return f'{e.factor}\n{e.reference} to {e.level}'
+    label, unit = CONDITION_LABELS.get(e.factor, (e.factor, ''))
+    return f'{label}\n{e.reference:g} to {e.level:g} {unit}'.rstrip()
 
 
 def _err(triples) -> np.ndarray:

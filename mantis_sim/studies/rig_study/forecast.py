@@ -20,20 +20,21 @@ any belief about the latent is a forecast without simulating again:
   seat moves most (docs/study.md).
 
 A forecast is of what the rig measures: the peak force as the load cell's amplifier passes it,
-and each value spread by the measurement's own error (quantities.MEASUREMENT_ERROR). Its
+and each value moved and spread by the rig's measuring chain (quantities.MEASUREMENT: the
+real rig's, or the simulated rig's, as its supervisor's backend says). Its
 quantiles, its PIT for a measured value and its 95 % interval come from the weighted ensemble;
 robots that did not strike are left out of it.
 """
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 from typing import Optional
 
 import numpy as np
 
-from mantis_sim.conditions import scene_for_conditions
+from mantis_sim.conditions import conditions_of_scene, scene_for_conditions
 from mantis_sim.model import SimulationError
 from mantis_sim.parameters import ParameterError
 from mantis_sim.results import simulate
@@ -41,8 +42,9 @@ from mantis_sim.robots import scene_spread
 from mantis_sim.scene import Scene
 from mantis_sim.sensors import first_order_lowpass
 from mantis_sim.spread import QUANTILE_LEVELS, quantile_label
+from mantis_sim.world import SETTLE_AFTER_PEAK_MS
 
-from .quantities import MEASUREMENT_ERROR, QUANTITIES
+from .quantities import QUANTITIES, RIG_ERROR
 
 #: The quantity the day's level is read from (see the module docstring).
 DAY_QUANTITY = 'loading_work_mJ'
@@ -64,6 +66,11 @@ FILTER_LEAD_MS = 5.0
 ENSEMBLE_SOLVER = 'fast'
 #: Each robot's value is spread over this many points of the measurement's error (normal).
 ERROR_POINTS = 15
+#: How long each robot is simulated past its peak tip speed: the tendon's tension peaks some
+#: milliseconds after the tip does (the arm's recoil), and the rig's load cell sees that peak
+#: (its world runs this long past the peak before it holds the pose). Stopped at the tip's peak,
+#: the ensembles' peak force was 8-14 % below the rig's.
+AFTER_PEAK_MS = SETTLE_AFTER_PEAK_MS
 
 
 def robot_quantities(task) -> dict:
@@ -139,9 +146,12 @@ def simulate_ensemble(scene: Scene, conditions: Mapping, robots: int, seed: int,
                       mapper: Callable = map, slack_force_N: float = 0.2) -> Ensemble:
     """The ensemble of ``robots`` robots at ``conditions`` (the same draws for a seed at every
     combination of conditions, so that their differences are the conditions'). Integrated by
-    ENSEMBLE_SOLVER whatever the scene's solver (the same model and tolerance)."""
-    design = scene_for_conditions(scene, conditions).with_values(
-        {'integration.solver': ENSEMBLE_SOLVER})
+    ENSEMBLE_SOLVER whatever the scene's solver (the same model and tolerance), each past its
+    peak tip speed by AFTER_PEAK_MS. The ensemble's conditions are all of CONDITION_KEYS: those
+    given, the scene's for the rest."""
+    at_conditions = scene_for_conditions(scene, conditions)
+    design = at_conditions.with_values({'integration.solver': ENSEMBLE_SOLVER,
+                                        'integration.post_peak_ms': AFTER_PEAK_MS})
     spread = scene_spread(design)
     draws = spread.draw(robots, np.random.default_rng(seed), design.geometry.contact_angle_deg)
     latent, lower, upper = None, math.nan, math.nan
@@ -158,7 +168,7 @@ def simulate_ensemble(scene: Scene, conditions: Mapping, robots: int, seed: int,
         simulated = np.array([r[name] for r in results], float)
         factor = draws.factors.get(DISCREPANCY_OF.get(name, ''), 1.0)
         values[name] = simulated * factor
-    return Ensemble(dict(conditions), latent, lower, upper, values)
+    return Ensemble(conditions_of_scene(at_conditions), latent, lower, upper, values)
 
 
 class LatentBelief:
@@ -189,6 +199,10 @@ class LatentBelief:
                         axis=0)
         return levels, _normalised(prior)
 
+    def strike_sds(self) -> np.ndarray:
+        """The within-day scatter of a strike about its day's level, one per model drawn."""
+        return np.array([m.strike_sd for m in self._models])
+
     def within_day_weights(self, ensemble: Ensemble, levels: np.ndarray) -> np.ndarray:
         """(levels, robots): each row the weights of the ensemble given the day's level."""
         sds = np.array([m.strike_sd for m in self._models])
@@ -203,18 +217,19 @@ class Forecast:
     values: dict
     weights: np.ndarray
     day_strikes: int        # earlier strikes of the day it was conditioned on
+    measurement: Mapping = field(default_factory=lambda: RIG_ERROR)
 
     def _finite(self, name: str) -> tuple[np.ndarray, np.ndarray]:
-        """The forecast of what the rig measures: each robot's value spread over the
-        measurement's own error (MEASUREMENT_ERROR, relative), robots that struck."""
+        """The forecast of what the rig measures: each robot's value moved and spread by the
+        rig's measuring chain (relative), robots that struck."""
         v = self.values[name]
         ok = np.isfinite(v) & (self.weights > 0)
         v, w = v[ok], self.weights[ok]
-        error = MEASUREMENT_ERROR.get(name, 0.0)
-        if error > 0 and v.size:
-            z = _normal_points(ERROR_POINTS)
-            v = (v[:, None] * (1.0 + error * z[None, :])).ravel()
-            w = np.repeat(w / ERROR_POINTS, ERROR_POINTS)
+        error = self.measurement.get(name)
+        if error is not None and v.size:
+            z = _normal_points(ERROR_POINTS) if error.sd > 0 else np.zeros(1)
+            v = (v[:, None] * (1.0 + error.bias + error.sd * z[None, :])).ravel()
+            w = np.repeat(w / z.size, z.size)
         return v, w
 
     def quantile(self, name: str, levels: Sequence[float]) -> np.ndarray:
@@ -246,32 +261,52 @@ class Forecast:
         return mean, float(math.sqrt(max(np.sum(w * (v - mean) ** 2), 0.0)))
 
 
+class MissingEnsemble(ParameterError):
+    """No ensemble was simulated at a trial's conditions (its ``conditions``: all of them)."""
+
+    def __init__(self, conditions: dict):
+        super().__init__(f'no forecast ensemble at the conditions {conditions}')
+        self.conditions = conditions
+
+
 class StudyForecaster:
     """Forecasts of a study's trials from one ensemble per combination of conditions."""
 
-    def __init__(self, scene: Scene, ensembles: Sequence[Ensemble], seed: int):
+    def __init__(self, scene: Scene, ensembles: Sequence[Ensemble], seed: int,
+                 measurement: Mapping = RIG_ERROR):
         self.scene = scene
+        self.measurement = measurement      # quantity -> MeasurementError of the rig's chain
         self.belief = LatentBelief(scene, seed)
-        self._ensembles = {_key(e.conditions): e for e in ensembles}
+        self._ensembles: dict = {}
+        for ensemble in ensembles:
+            self.add(ensemble)
         self._within: dict = {}
         self._levels = self._prior = None
         if self.belief.latent is not None:
             self._levels, self._prior = self.belief.level_grid()
 
+    def conditions(self, conditions: Mapping) -> dict:
+        """All of a trial's conditions (CONDITION_KEYS): those given, the scene's for the rest."""
+        return conditions_of_scene(scene_for_conditions(self.scene, conditions))
+
+    def add(self, ensemble: Ensemble) -> None:
+        self._ensembles[_key(self.conditions(ensemble.conditions))] = ensemble
+
+    def has(self, conditions: Mapping) -> bool:
+        return _key(self.conditions(conditions)) in self._ensembles
+
     def ensemble(self, conditions: Mapping) -> Ensemble:
-        """The ensemble of these conditions: the one whose own conditions (a plan's factors
-        and fixed ones) all hold in ``conditions`` (which may name the rig's others too)."""
-        found = self._ensembles.get(_key(conditions))
+        """The ensemble simulated at exactly these conditions (those given, the scene's for
+        the rest): a trial is forecast at the conditions it ran at, whoever set them.
+        MissingEnsemble where none was."""
+        full = self.conditions(conditions)
+        found = self._ensembles.get(_key(full))
         if found is None:
-            given = dict(_key(conditions))
-            found = next((e for key, e in self._ensembles.items()
-                          if all(given.get(k) == v for k, v in key)), None)
-        if found is None:
-            raise ParameterError(f'no forecast ensemble for the conditions {dict(conditions)}')
+            raise MissingEnsemble(full)
         return found
 
     def _within_day(self, conditions: Mapping) -> np.ndarray:
-        key = _key(conditions)
+        key = _key(self.conditions(conditions))
         if key not in self._within:
             self._within[key] = self.belief.within_day_weights(self.ensemble(conditions),
                                                                self._levels)
@@ -284,10 +319,11 @@ class StudyForecaster:
         ensemble = self.ensemble(conditions)
         earlier = [(c, m) for c, m in earlier if m is not None and math.isfinite(m)]
         if self._levels is None or not earlier:
-            return Forecast(ensemble.values, self.belief.new_day_weights(ensemble), 0)
+            return Forecast(ensemble.values, self.belief.new_day_weights(ensemble), 0,
+                            self.measurement)
         posterior = self.day_posterior(earlier)
         weights = _normalised(posterior @ self._within_day(conditions))
-        return Forecast(ensemble.values, weights, len(earlier))
+        return Forecast(ensemble.values, weights, len(earlier), self.measurement)
 
     def day_posterior(self, earlier: Sequence[tuple[Mapping, float]]) -> np.ndarray:
         log_post = np.log(np.maximum(self._prior, 1e-300))
@@ -306,6 +342,15 @@ class StudyForecaster:
         post = self.day_posterior(earlier) if earlier else self._prior
         mean = float(np.sum(post * self._levels))
         return mean, float(math.sqrt(np.sum(post * (self._levels - mean) ** 2)))
+
+    def level_draws(self, strikes: Sequence[tuple[Mapping, float]], n: int,
+                    rng: np.random.Generator) -> np.ndarray:
+        """n draws of the day's level given its ``strikes`` (the prior without any), each
+        spread evenly within its grid step."""
+        post = self.day_posterior(strikes) if strikes else self._prior
+        step = self._levels[1] - self._levels[0]
+        picks = rng.choice(self._levels, size=n, p=post)
+        return picks + rng.uniform(-0.5 * step, 0.5 * step, n)
 
 
 def _key(conditions: Mapping) -> tuple:
@@ -362,4 +407,5 @@ def _bandwidth(y: np.ndarray) -> float:
 
 
 __all__ = ['DAY_QUANTITY', 'Ensemble', 'Forecast', 'INTERVAL_95', 'LatentBelief',
-           'StudyForecaster', 'latent_layout', 'robot_quantities', 'simulate_ensemble']
+           'MissingEnsemble', 'StudyForecaster', 'latent_layout', 'robot_quantities',
+           'simulate_ensemble']
