@@ -65,7 +65,7 @@ def test_the_effect_is_this_days_where_it_depends_on_the_seat():
 def test_the_measuring_chain_widens_and_moves_the_forecast():
     speeds = {'19': lambda x: 30.0 + 0.0 * x, '25': lambda x: 28.0 + 0.0 * x}
     exact = twin_effects(PLAN, _forecaster(**speeds), 'peak_tip_speed_mps', _rows(0.0))
-    chain = {'peak_tip_speed_mps': MeasurementError(-0.01, 0.01)}
+    chain = {'peak_tip_speed_mps': MeasurementError.normal(-0.01, 0.01)}
     measured = twin_effects(PLAN, _forecaster(chain, **speeds), 'peak_tip_speed_mps',
                             _rows(0.0))
     _, low, high = exact[('d_t_mm', 25.0)]

@@ -82,7 +82,7 @@ def _with_error(values: np.ndarray, error, rng: np.random.Generator) -> np.ndarr
     """The values as the rig's measuring chain (a quantities.MeasurementError) reads them."""
     if error is None:
         return values
-    return values * (1.0 + error.bias + error.sd * rng.normal(0.0, 1.0, values.shape))
+    return values * (1.0 + rng.choice(np.asarray(error.points), size=values.shape))
 
 
 def replayed_effects(x: np.ndarray, values: np.ndarray) -> np.ndarray:

@@ -64,8 +64,6 @@ FILTER_LEAD_MS = 5.0
 #: cost a robot; on air_23mm_rig its quantities agree with LSODA's to 1e-6 and the load-cell
 #: peak to 0.05 % (docs/study.md).
 ENSEMBLE_SOLVER = 'fast'
-#: Each robot's value is spread over this many points of the measurement's error (normal).
-ERROR_POINTS = 15
 #: How long each robot is simulated past its peak tip speed: the tendon's tension peaks some
 #: milliseconds after the tip does (the arm's recoil), and the rig's load cell sees that peak
 #: (its world runs this long past the peak before it holds the pose). Stopped at the tip's peak,
@@ -227,9 +225,9 @@ class Forecast:
         v, w = v[ok], self.weights[ok]
         error = self.measurement.get(name)
         if error is not None and v.size:
-            z = _normal_points(ERROR_POINTS) if error.sd > 0 else np.zeros(1)
-            v = (v[:, None] * (1.0 + error.bias + error.sd * z[None, :])).ravel()
-            w = np.repeat(w / z.size, z.size)
+            e = np.asarray(error.points)
+            v = (v[:, None] * (1.0 + e[None, :])).ravel()
+            w = np.repeat(w / e.size, e.size)
         return v, w
 
     def quantile(self, name: str, levels: Sequence[float]) -> np.ndarray:
@@ -359,12 +357,6 @@ def _key(conditions: Mapping) -> tuple:
 
 def _norm(value):
     return round(float(value), 9) if isinstance(value, (int, float)) else str(value)
-
-
-def _normal_points(n: int) -> np.ndarray:
-    """n equally likely points of a standard normal (the midpoints of its n quantiles)."""
-    from scipy.special import ndtri
-    return ndtri((np.arange(n) + 0.5) / n)
 
 
 def _uniform(n: int) -> np.ndarray:
