@@ -469,6 +469,10 @@ CAMERA_PARAMETERS = (
     ParamSpec('lines', DEFAULT_TRIGGER_OUTPUT, '', 'hardware: trigger output, a DO line '
               '(Dev1/port0/line0) or a counter (Dev1/ctr0)', at_configure=True,
               check=_check_lines),
+    ParamSpec('film_dir', '', '', 'sim: film the next recording into this folder (an absolute '
+              'path; read at arm): video.cine, calibration.yaml, truth.csv, written whole or '
+              'not at all after its marker frames are published; \'\': no film. Refused on '
+              'hardware, whose camera records itself'),
 )
 #: the trial conditions the simulated world builds each latching's robot from
 #: (mantis_sim.conditions); the supervisor sets them before each simulated trial, and the world
@@ -535,6 +539,9 @@ SUPERVISOR_PARAMETERS = (
     ParamSpec('post_trigger_s', 0.05, 's', 'camera frames kept after the trigger', (0.0, 1.0)),
     ParamSpec('expect_markers', True, '', 'wait for the marker frames of the window '
               '(simulation)'),
+    ParamSpec('video', False, '', 'simulation: the camera films each trial\'s recorded window '
+              'into <bag>/video/ (docs/simulated_rig.md, Filming); the trial does not wait for '
+              'the film'),
     ParamSpec('phase_timeout_s', 60.0, 's', 'wall time any one phase may take before an abort',
               (1.0, 3600.0)),
     ParamSpec('position_tolerance_mm', 0.1, 'mm', 'a move has arrived when the stage rests '
@@ -545,7 +552,11 @@ SUPERVISOR_PARAMETERS = (
 CONDITION_KEYS = ('pull_speed_mm_s', 'medium', 'd_t_mm', 'contact_angle_deg', FORCE_CEILING.name,
                   TRAVEL.name, 'operator_note', 'scene', 'backend')
 #: the supervisor sets these on camera_node before each arm
-CAMERA_WINDOW_PARAMETERS = ('frame_rate_hz', 'pre_trigger_s', 'post_trigger_s')
+CAMERA_WINDOW_PARAMETERS = ('frame_rate_hz', 'pre_trigger_s', 'post_trigger_s', 'film_dir')
+#: where a trial's film goes, in its bag directory (the supervisor's ``video``); beside it,
+#: ``<film folder>.failed`` holds why the camera could not film
+FILM_FOLDER = 'video'
+FILM_FAILED_SUFFIX = '.failed'
 
 #: node -> its own parameters (ROS's use_sim_time aside)
 NODE_PARAMETERS = {

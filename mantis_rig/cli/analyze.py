@@ -17,6 +17,7 @@ from .options import (
     json_safe,
     positive_int,
 )
+from .track import add_video_options
 
 #: Re-trackings of `mantis analyze --intervals` without N (each costs one analysis).
 INTERVAL_REPLICAS = 40
@@ -116,11 +117,13 @@ def run_analyze(args) -> int:
 
 def _analyze_one(args) -> int:
     from ..analysis.inputs import is_bag_path, read_trial
-    from ..analysis.trial import TrialRefused, analyse_trial
+    from ..video.to_csv import is_recording
 
     given = given_conditions(args)
-    bag = is_bag_path(args.path)
     options = export_options(args)
+    if is_recording(args.path):
+        return _analyze_video(args, given, options)
+    bag = is_bag_path(args.path)
     if bag and any(v is not None for v in options.values()):
         raise InputError(f'{args.path} is a bag: --frame-rate and --length-unit apply to '
                          'tracking files only (a bag states its own)')
@@ -128,6 +131,31 @@ def _analyze_one(args) -> int:
         trial = read_trial(args.path, **options)
     except OSError as exc:
         raise InputError(f'{args.path}: {exc}') from exc
+    return _analyze_trial(args, trial, given)
+
+
+def _analyze_video(args, given, options) -> int:
+    """Track the recording (as `mantis track`), then analyse its tracks as an export's."""
+    import tempfile
+
+    from ..analysis.inputs import read_trial
+    from .track import track_video
+    if any(v is not None for v in options.values()):
+        raise InputError(f'{args.path} is a recording: give its rate with --rate and its '
+                         'scale with --calibration (--frame-rate and --length-unit are for '
+                         'tracking files)')
+    with tempfile.TemporaryDirectory(prefix='mantis_track_') as tmp:
+        result = track_video(args, args.path, Path(tmp) / 'tracks.csv', label='analyze',
+                             damage_ok=True)
+        if result.calibration is None:
+            raise InputError(f'{args.path}: the analysis needs millimetres: give '
+                             '--calibration CAL.yaml or --marker-distance A,B=MM')
+        trial = read_trial(result.csv)
+    return _analyze_trial(args, trial, given)
+
+
+def _analyze_trial(args, trial, given) -> int:
+    from ..analysis.trial import TrialRefused, analyse_trial
     if trial.problems:
         err('analyze', f'warning: {args.path} is damaged: {"; ".join(trial.problems)}')
         err('analyze', f'warning: analysing the {trial.tracks.n_frames} frames recorded '
@@ -210,12 +238,14 @@ def run_analyze_batch(args) -> int:
 def add_commands(commands) -> None:
     ana = commands.add_parser(
         'analyze', help='phases, speeds and energies of a trial, or of many (--table)',
-        description='Analyse a trial bag (directory or .mcap) or a tracking file. With '
+        description='Analyse a trial bag (directory or .mcap), a tracking file, or a '
+                    'recording (.cine, .avi, a folder of frames: tracked first as by `mantis '
+                    'track`, then analysed as its export). With '
                     '--table or several paths: analyse every trial they name (directories are '
                     'searched recursively for tracking files *.xlsx, *.csv, *.csv.gz and for '
                     'bags) in parallel and write one row per trial to a CSV table; exit 1 if '
                     'any trial was refused (its row says why).')
-    ana.add_argument('paths', nargs='+', metavar='BAG_OR_TRACKING_FILE_OR_DIR')
+    ana.add_argument('paths', nargs='+', metavar='BAG_TRACKING_FILE_RECORDING_OR_DIR')
     ana.add_argument('--json', action='store_true', help='print the summary as JSON')
     ana.add_argument('--plot', metavar='FILE.png', help='write the trial figure')
     ana.add_argument('--intervals', type=int, nargs='?', const=INTERVAL_REPLICAS, default=0,
@@ -232,4 +262,5 @@ def add_commands(commands) -> None:
                      help='batch: trials analysed at once (default: one per core)')
     add_condition_options(ana)
     add_export_options(ana)
+    add_video_options(ana)
     ana.set_defaults(run=run_analyze)

@@ -20,6 +20,7 @@ from . import (
     sim,
     study,
     sweep,
+    track,
     trial,
 )
 
@@ -42,6 +43,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_commands(commands)
     replay.add_commands(commands)
     import_tracking.add_commands(commands)
+    track.add_commands(commands)
     analyze.add_commands(commands)
     recover.add_commands(commands)
     trial.add_commands(commands)

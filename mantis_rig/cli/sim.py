@@ -31,8 +31,17 @@ def add_commands(commands) -> None:
                      help='draw N robots from the scene\'s spread (where the arm sits, the '
                           'identified parameters, the discrepancy: docs/spread.md) and print '
                           f'the quantiles q05..q95 of each metric (N default {DEFAULT_ROBOTS})')
+    sim.add_argument('--video', type=Path, metavar='DIR',
+                     help='also film the strike as the rig\'s camera does (its frame rate and '
+                          'pixel size the scene\'s camera.*): DIR/video.avi (lossless), '
+                          'DIR/calibration.yaml and DIR/truth.csv (each marker\'s true '
+                          'position per frame)')
+    sim.add_argument('--video-format', choices=('avi', 'avi-raw', 'cine'), default='avi',
+                     help='with --video: avi (lossless FFV1, default), avi-raw (uncompressed, '
+                          'as the camera\'s software writes it) or cine (a Phantom .cine)')
     sim.add_argument('--seed', type=int, default=1,
-                     help='seed of the robots drawn by --spread (default 1)')
+                     help='seed of the robots drawn by --spread and of the camera\'s sensor '
+                          'noise with --video (default 1)')
     sim.add_argument('--day', metavar='RECORDING_DAY',
                      help='with --spread: robots of this recording day\'s assembly, one the '
                           'spread was fitted with (default: a new day\'s)')
@@ -79,6 +88,8 @@ def run_sim(args) -> int:
     if args.day is not None and args.spread is None:
         raise InputError('--day names the recording day of the robots --spread draws')
     if args.spread is not None:
+        if args.video:
+            raise InputError('--video films one strike; --spread draws many robots')
         return _run_spread(args, scene)
     result = simulate(scene)
     warnings = result.metrics[WARNINGS] + ceiling_warning(result.metrics['peak_tendon_force_N'])
@@ -97,7 +108,29 @@ def run_sim(args) -> int:
                 print(f'{label}: {path}')
     for line in warnings:               # in the text, and beside the JSON on stderr
         print(f'warning: {line}', file=sys.stderr if args.json else sys.stdout)
+    if args.video:
+        if not result.metrics['strike_reached']:
+            raise InputError(f'--video: scene {scene.name} does not strike '
+                             f'({result.metrics["reason"]}): nothing to film')
+        _film(args, scene)
     return 0
+
+
+def _film(args, scene) -> None:
+    """The strike as the rig's camera films it (its rate and pixel size the scene's)."""
+    from mantis_sim.camera.render import CameraSetup, film_strike
+
+    from ..video.to_csv import ProgressLine
+    setup = CameraSetup(rate_hz=scene.camera.frame_rate_hz,
+                        scale_px_per_mm=1.0 / scene.camera.pixel_mm, seed=args.seed)
+    film = film_strike(scene, args.video, setup, video_format=args.video_format,
+                       progress=ProgressLine('sim --video'))
+    rate = f'{film.rate_hz:g} frames/s'
+    print(f'video: {film.video} ({film.frame_count} frames at {rate}'
+          + (f'; an .avi carries no recording rate: `mantis track {film.video} --rate '
+             f'{film.rate_hz:g}`)' if film.video.suffix == '.avi' else ')'))
+    print(f'calibration: {film.calibration}')
+    print(f'truth: {film.truth}')
 
 
 def _run_spread(args, scene) -> int:

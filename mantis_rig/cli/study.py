@@ -1,6 +1,6 @@
 """`mantis study`: run a plan of trials on a rig, each judged against the twin as it lands;
-`mantis study attach` fills the rows' tip speed and energy from tracker exports; `mantis study
-report` writes the effects and figures (docs/study.md)."""
+`mantis study attach` fills the rows' tip speed and energy from the videos (tracked here) or
+their tracker exports; `mantis study report` writes the effects and figures (docs/study.md)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -8,10 +8,11 @@ from pathlib import Path
 from mantis_sim.errors import InputError
 
 from ..errors import RIG_FAULT, USAGE_ERROR
+from .track import add_video_options
 from .trial import PROCESSES
 
 USAGE = """mantis study PLAN --out DIR [options]     run (or resume) a study on a rig
-       mantis study attach DIR EXPORTS...      fill rows from the tracked videos' exports
+       mantis study attach DIR FILES...        fill rows from the videos or their exports
        mantis study report DIR                 effects, repeats still needed, figures"""
 EXIT_STATUSES = (
     f'exit status: 0 every planned trial is recorded; {USAGE_ERROR} bad input (the plan, '
@@ -28,8 +29,9 @@ def add_commands(commands) -> None:
         description=__doc__)
     study.add_argument('plan', metavar='PLAN|attach|report',
                        help='the plan (YAML, docs/study.md), or attach / report')
-    study.add_argument('rest', nargs='*', metavar='DIR EXPORTS',
-                       help='attach: the study directory and the exports; report: the '
+    study.add_argument('rest', nargs='*', metavar='DIR FILES',
+                       help='attach: the study directory and the videos (.cine, .avi: tracked '
+                            'with --calibration, --rate ...) or their exports; report: the '
                             'study directory')
     study.add_argument('--out', type=Path, help='the study\'s directory (its record study.csv, '
                        'the plan as run, the bags under bags/, the report under report/)')
@@ -53,6 +55,7 @@ def add_commands(commands) -> None:
     study.add_argument('--log-dir', type=Path, help='with --processes multi: node output here')
     study.add_argument('--ask', action='store_true',
                        help='ask the person before each trial also in simulation')
+    add_video_options(study)
     study.set_defaults(run=run_study, live=None, pull_speed=None)
 
 
@@ -88,8 +91,12 @@ def _attach(args) -> int:
     directory = _directory(args)
     exports = [Path(p) for p in args.rest[1:]]
     if not exports:
-        raise InputError('mantis study attach DIR EXPORTS...: no export given')
-    filled = attach_exports(directory, exports, say=print)
+        raise InputError('mantis study attach DIR FILES...: no video or export given')
+    from .track import track_video
+
+    def tracked(video: Path, out: Path) -> Path:
+        return track_video(args, video, out, label='study attach').csv
+    filled = attach_exports(directory, exports, say=print, track_video=tracked)
     print(f'{filled} row(s) filled from {len(exports)} export(s); {directory / "study.csv"}')
     return 0
 

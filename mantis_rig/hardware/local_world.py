@@ -132,3 +132,18 @@ class LocalWorldPort(WorldPort):
                 return self.world.marker_positions_m(times_s)
             except Exception as exc:
                 raise DeviceError(f'simulated camera: {exc}') from exc
+
+    def record_frames(self, frame_times_s: np.ndarray, tolerance_mm: float, timeout_s: float):
+        frame_times_s = np.asarray(frame_times_s, dtype=float)
+        if frame_times_s.size:      # one frame interval past the last: its exposure
+            interval = frame_times_s[1] - frame_times_s[0] if frame_times_s.size > 1 else 1e-3
+            self.wait_until(frame_times_s.max() + interval, timeout_s)
+        from mantis_sim.camera.recorded_pose import record_frames
+        from mantis_sim.camera.render import world_poses
+        with self.runner.lock:          # the world stands still while its history is copied
+            try:
+                return record_frames(world_poses(self.world), frame_times_s, tolerance_mm,
+                                     medium=self.world.robot.medium.name)
+            except Exception as exc:
+                raise DeviceError(f'simulated camera: recording the poses to film: {exc}') \
+                    from exc

@@ -7,10 +7,14 @@ simulated rig, mantis_rig.nodes.sim_rig). Times are simulated seconds.
 from __future__ import annotations
 
 import abc
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .interfaces import DeviceError
+
+if TYPE_CHECKING:
+    from mantis_sim.camera.recorded_pose import RecordedPose
 
 
 class WorldPort(abc.ABC):
@@ -43,6 +47,16 @@ class WorldPort(abc.ABC):
     def marker_frames(self, times_s: np.ndarray, timeout_s: float) -> dict:
         """True marker positions (name -> (n, 2) m, camera frame) at times_s; blocks until
         simulated. Times older than the world's history raise DeviceError."""
+
+    def record_frames(self, frame_times_s: np.ndarray, tolerance_mm: float,
+                      timeout_s: float) -> RecordedPose:
+        """The mechanism's true pose for filming the frames at frame_times_s, taken at once
+        (the world forgets and runs on while a film renders): a
+        mantis_sim.camera.recorded_pose.RecordedPose (record_frames: every frame, and finer
+        where a point moves more than tolerance_mm a frame), with the medium the robot struck
+        in; blocks until simulated one frame past the last. A port that cannot give it raises
+        DeviceError."""
+        raise DeviceError(f'{type(self).__name__} cannot give the poses a film needs')
 
 
 class WorldTimeout(DeviceError):

@@ -87,9 +87,11 @@ class RigClient:
         return self._request(self._triggers[service], Trigger.Request(),
                              lambda r: (r.success, r.message), wait)
 
-    def set_camera(self, frame_rate_hz, pre_trigger_s, post_trigger_s) -> Pending:
+    def set_camera(self, frame_rate_hz, pre_trigger_s, post_trigger_s,
+                   film_dir: str = '') -> Pending:
         return self.set_parameters(contract.CAMERA_NODE, dict(zip(
-            contract.CAMERA_WINDOW_PARAMETERS, (frame_rate_hz, pre_trigger_s, post_trigger_s))))
+            contract.CAMERA_WINDOW_PARAMETERS,
+            (frame_rate_hz, pre_trigger_s, post_trigger_s, str(film_dir)))))
 
     def set_parameters(self, node_name: str, values: dict) -> Pending:
         """Set parameters of a device node or the world (strings as strings, booleans as

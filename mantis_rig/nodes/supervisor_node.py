@@ -9,7 +9,9 @@ is never refused.
 A second abort while an aborted trial returns the stage stops it where it is. The trial
 conditions and procedure settings are parameters (mantis_rig.trial.conditions); they are
 fixed while a trial runs. Each trial is logged to its own bag directory under ``out``; the
-start_trial response names it. The sequence itself is mantis_rig.trial.sequence.
+start_trial response names it. With ``video`` true the simulated camera films the trial into
+``<bag directory>/video/`` (contract.FILM_FOLDER), after the trial's marker frames. The
+sequence itself is mantis_rig.trial.sequence.
 While the node lives it publishes its heartbeat (``/supervisor/heartbeat``, std_msgs/Header,
 every 50 ms of steady time, from a thread of its own): stage_node stops a pull or move the
 supervisor commanded when it lapses (docs/architecture.md, Stopping).
@@ -231,9 +233,10 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
         self._log_closed, self._end = False, None
         number = self.trials
         port = _TrialPort(self.rig, lambda state, reason: self._trial_state(number, state, reason))
+        film_dir = str((path / contract.FILM_FOLDER).resolve()) if conditions.video else ''
         sequence = TrialSequence(port, conditions,
                                  lambda outcome: self._close_log(outcome, number, bag, path),
-                                 self.session)
+                                 self.session, film_dir=film_dir)
         self.sequence = sequence
         self.recorder.start(bag)
         sequence.start()

@@ -1,5 +1,6 @@
 """The study's analyst: one worker process, started fresh (spawn), that simulates the twin's
-forecast ensembles and measures each trial's bag while the rig runs the next trial, and
+forecast ensembles and measures each trial's bag (and, in a study whose plan says
+``video: true``, waits for its film and tracks it) while the rig runs the next trial, and
 writes the report while the rig's stack shuts down. It runs on the CPU the rig leaves idle
 (Linux's SCHED_IDLE; elsewhere niceness 10), with one BLAS thread: a trial in progress keeps
 the machine first. Results come back in the order the work was asked for."""
@@ -48,6 +49,15 @@ def _measure(bag: str) -> dict:
         return {'analysis_note': f'cannot measure {bag}: {type(exc).__name__}: {exc}'}
 
 
+def _measure_filmed(bag: str, tracks_csv: str) -> dict:
+    from mantis_rig.study.measure import measure_filmed_trial
+    try:
+        return measure_filmed_trial(Path(bag), Path(tracks_csv))
+    except Exception as exc:  # noqa: BLE001 - as _measure: the row's note
+        return {'analysis_note': f'cannot measure {bag} from its film: '
+                                 f'{type(exc).__name__}: {exc}'}
+
+
 def _report(directory: str) -> tuple[str, list]:
     from mantis_rig.study.report import write_report
     said: list = []
@@ -67,6 +77,11 @@ class Analyst:
 
     def measure(self, bag: Path) -> Future:
         return self._pool.submit(_measure, str(bag))
+
+    def measure_filmed(self, bag: Path, tracks_csv: Path) -> Future:
+        """The trial's measurement, its tip speed and energy from its film (waited for, then
+        tracked into ``tracks_csv``) instead of its bag's marker frames."""
+        return self._pool.submit(_measure_filmed, str(bag), str(tracks_csv))
 
     def report(self, directory: Path) -> Future:
         """The study's report, written while the rig's stack shuts down: (its folder, the

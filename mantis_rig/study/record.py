@@ -32,10 +32,13 @@ MAX_REPEATS_OF_AN_ABORT = 2
 
 LEADING = ('run', 'trial', 'block', 'attempt', *CONDITION_KEYS, 'status', 'reason', 'bag',
            'video', 'day', 'started_utc', 'analysed')
-TRAILING = ('flags', 'cause', 'day_strikes')
+#: ``markers_from``: where the tip speed and spring energy came from (``bag``: the simulated
+#: camera's marker frames in the bag; ``video``: the trial's film or its video attached, tracked;
+#: ``export``: a tracker export attached; empty: neither)
+TRAILING = ('flags', 'cause', 'day_strikes', 'markers_from')
 INTEGER_COLUMNS = ('run', 'trial', 'block', 'attempt', 'day_strikes')
 TEXT_COLUMNS = ('medium', 'status', 'reason', 'bag', 'video', 'day', 'started_utc', 'analysed',
-                'flags', 'cause') + tuple(f'{q}_flag' for q in QUANTITIES)
+                'flags', 'cause', 'markers_from') + tuple(f'{q}_flag' for q in QUANTITIES)
 
 
 def columns() -> list[str]:

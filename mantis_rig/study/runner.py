@@ -54,6 +54,7 @@ PLAN_AS_RUN = 'plan.yaml'
 BAGS = 'bags'
 ENSEMBLES = 'forecast_ensembles.pkl'     # the twin's robots at each combination, simulated once
 RIG = 'rig.yaml'            # the rig the study ran on: its backend, whose measuring chain it is
+TRACKS = 'tracks'           # DIR/tracks/<video>.csv: each filmed trial's tracks (as attach's)
 
 
 class StudyError(InputError):
@@ -111,6 +112,7 @@ class StudyRunner:
     # ------------------------------------------------------------------ the record
     def open(self) -> StudyRecord:
         """The record: the study's own when DIR holds one of this plan, else a new one."""
+        self._check_video()
         self.directory.mkdir(parents=True, exist_ok=True)
         (self.directory / BAGS).mkdir(exist_ok=True)
         path = self.directory / RECORD_NAME
@@ -140,11 +142,18 @@ class StudyRunner:
         self._measure_unmeasured()
         return self.record
 
+    def _check_video(self) -> None:
+        """A plan that says ``video: true`` needs the simulated rig's camera, which films."""
+        if self.plan.video and self.rig is not None and self.rig.backend() != 'sim':
+            raise StudyError(f'the plan says video: true, which the simulated camera films; the '
+                             f'{self.rig.backend()} camera records the strike itself: leave '
+                             f'video out and attach its recordings (mantis study attach)')
+
     def _plan_as_run(self) -> StudyPlan:
         stored, given = plan_as_run(self.directory), self.plan
         path = self.directory / PLAN_AS_RUN
         differ = [k for k in ('scene', 'factors', 'order', 'seed', 'fixed', 'hard_to_change',
-                              'robots') if getattr(stored, k) != getattr(given, k)]
+                              'robots', 'video') if getattr(stored, k) != getattr(given, k)]
         if given.repeats is not None and given.repeats != stored.repeats:
             differ.append('repeats')
         if differ:
@@ -269,7 +278,18 @@ class StudyRunner:
     def _measure_unmeasured(self) -> None:
         for row in self.record.rows:
             if row['status'] == DONE and row.get('analysed') != 'yes' and row.get('bag'):
-                self._measuring[id(row)] = (row, self.analyst.measure(self._bag_path(row)))
+                self._measure(row)
+
+    def _measure(self, row: dict) -> None:
+        """Ask the analyst for a done row's measurement: of its bag, and with the plan's
+        ``video`` of its film, tracked into DIR/tracks/<its video name>.csv."""
+        bag = self._bag_path(row)
+        if self.plan.video:
+            tracks = self.directory / TRACKS / f'{row["video"]}.csv'
+            future = self.analyst.measure_filmed(bag, tracks)
+        else:
+            future = self.analyst.measure(bag)
+        self._measuring[id(row)] = (row, future)
 
     def _bag_path(self, row: dict) -> Path:
         bag = Path(row['bag'])
@@ -285,6 +305,7 @@ class StudyRunner:
             note = values.pop('analysis_note', '')
             row.update({q: values.get(q) for q in QUANTITIES})
             row['analysed'] = 'yes'
+            row['markers_from'] = values.get('markers_from') or None
             if note:
                 row['reason'] = f'markers not analysed: {note}'
             del self._measuring[key]
@@ -322,7 +343,8 @@ class StudyRunner:
 
     def _run_trial(self, row: dict) -> None:
         conditions = {k: row[k] for k in CONDITION_KEYS if row.get(k) is not None}
-        self.rig.set_conditions({**conditions, 'out': str((self.directory / BAGS).resolve())})
+        self.rig.set_conditions({**conditions, 'out': str((self.directory / BAGS).resolve()),
+                                 'video': self.plan.video})
         row.update(self.rig.conditions())        # the rig's own for what the plan leaves open
         now = datetime.now(UTC)
         row.update(status=STARTING, started_utc=now.isoformat(timespec='seconds'),
@@ -347,7 +369,7 @@ class StudyRunner:
         self.current = None
         if final == 'done':
             row.update(status=DONE, reason='')
-            self._measuring[id(row)] = (row, self.analyst.measure(self._bag_path(row)))
+            self._measure(row)
         else:
             row.update(status=ABORTED, reason=reason)
             repeats = sum(1 for r in self.record.attempts_of(row['trial'])) - 1

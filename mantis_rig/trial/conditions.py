@@ -68,6 +68,7 @@ class TrialConditions:
     pre_trigger_s: float = PARAMETERS['pre_trigger_s'].default
     post_trigger_s: float = PARAMETERS['post_trigger_s'].default
     expect_markers: bool = True
+    video: bool = False
     supervisor_force_monitor: bool = True
     phase_timeout_s: float = PARAMETERS['phase_timeout_s'].default
     position_tolerance_mm: float = PARAMETERS['position_tolerance_mm'].default
@@ -85,6 +86,10 @@ class TrialConditions:
             raise ConditionError(f'pre_trigger_s + post_trigger_s = '
                                  f'{self.pre_trigger_s + self.post_trigger_s} s exceeds the '
                                  f'camera buffer (1 s)')
+        if self.video and self.backend != 'sim':
+            raise ConditionError(f'video = true films with the simulated camera; the '
+                                 f'{self.backend} camera records the strike itself (save its '
+                                 f'recording and attach it: mantis study attach)')
         return self
 
     def metadata(self) -> dict:

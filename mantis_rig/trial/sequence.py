@@ -139,7 +139,7 @@ class RigPort(Protocol):
     def change_state(self, node: str, transition: str) -> Pending: ...
     def call(self, service: str) -> Pending: ...          # std_srvs/Trigger, by contract name
     def set_camera(self, frame_rate_hz: float, pre_trigger_s: float,
-                   post_trigger_s: float) -> Pending: ...
+                   post_trigger_s: float, film_dir: str = '') -> Pending: ...
     def set_parameters(self, node: str, values: dict) -> Pending: ...
     def move_at(self, velocity_m_per_s: float) -> None: ...
     def move_to(self, position_m: float) -> None: ...
@@ -151,9 +151,12 @@ class RigPort(Protocol):
 class TrialSequence:
     def __init__(self, rig: RigPort, conditions: TrialConditions,
                  close_log: Callable[[dict], None] | None = None,
-                 session: SessionState | None = None):
+                 session: SessionState | None = None, film_dir: str = ''):
+        """film_dir: where the simulated camera films this trial ('' : no film; the
+        supervisor's ``video``); set on the camera with its window before it is armed."""
         self.rig = rig
         self.conditions = conditions
+        self.film_dir = str(film_dir)
         self.session = session or SessionState()
         self._reset_devices = set(self.session.devices_in_error)
         self.close_log = close_log or (lambda outcome: None)
@@ -557,7 +560,8 @@ class TrialSequence:
     def _arm(self) -> None:
         self._set_state('arming')
         c = self.conditions
-        self._await(self.rig.set_camera(c.frame_rate_hz, c.pre_trigger_s, c.post_trigger_s),
+        self._await(self.rig.set_camera(c.frame_rate_hz, c.pre_trigger_s, c.post_trigger_s,
+                                        self.film_dir),
                     'set camera parameters')
         self._await(self.rig.call(CAMERA_ARM.name), 'camera arm')
 

@@ -500,6 +500,21 @@ def test_invalid_parameters_are_refused_with_the_reason(rig):
     assert ok.successful
 
 
+def test_the_hardware_camera_refuses_to_film_and_the_simulated_one_takes_a_folder(rig):
+    """The rig's camera records itself: film_dir is the simulated camera's."""
+    hardware = rig.add(CameraNode(context=rig.context, parameter_overrides=[
+        Parameter('backend', value='hardware')]))
+    (result,) = hardware.set_parameters([Parameter('film_dir', value='/tmp/film')])
+    assert not result.successful and 'records the strike itself' in result.reason
+    (result,) = hardware.set_parameters([Parameter('film_dir', value='')])
+    assert result.successful
+    sim = rig.add(CameraNode('camera_node_sim', context=rig.context))
+    (result,) = sim.set_parameters([Parameter('film_dir', value='relative/film')])
+    assert not result.successful and 'not an absolute path' in result.reason
+    (result,) = sim.set_parameters([Parameter('film_dir', value='/tmp/bag/video')])
+    assert result.successful
+
+
 def configure_fails(rig, name):
     """Configure is refused, the node stays unconfigured; its last ERROR on /diagnostics."""
     assert not rig.transition(name, Transition.TRANSITION_CONFIGURE)

@@ -114,8 +114,9 @@ class FakeRig:
             self.v, self.target = 0.0, None
         return Pending((True, 'ok'), done=True)
 
-    def set_camera(self, frame_rate_hz, pre_trigger_s, post_trigger_s):
+    def set_camera(self, frame_rate_hz, pre_trigger_s, post_trigger_s, film_dir=''):
         self.camera = (frame_rate_hz, pre_trigger_s, post_trigger_s)
+        self.film_dir = film_dir
         return Pending((True, ''), done=True)
 
     def set_parameters(self, node, values):

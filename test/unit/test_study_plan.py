@@ -99,3 +99,21 @@ def test_not_yaml_and_missing_file_are_named(tmp_path):
         _plan(tmp_path, 'scene: [')
     with pytest.raises(PlanError, match='cannot read the plan'):
         load_plan(tmp_path / 'missing.yaml')
+
+
+def test_video_is_true_or_false_and_round_trips(tmp_path):
+    assert _plan(tmp_path, BINDING).video is False
+    plan = _plan(tmp_path, BINDING + 'video: true\n')
+    assert plan.video is True
+    assert plan.to_mapping()['video'] is True
+    assert plan_from_mapping(plan.to_mapping(), 'again') == plan
+    assert 'video' not in _plan(tmp_path, BINDING).to_mapping()
+    with pytest.raises(PlanError, match="video: 'yes' is not true or false"):
+        _plan(tmp_path, BINDING + 'video: "yes"\n')
+
+
+def test_video_is_refused_on_hardware_before_a_trial_starts():
+    from mantis_rig.trial.conditions import ConditionError, TrialConditions
+    assert TrialConditions(video=True).validate().video
+    with pytest.raises(ConditionError, match='the hardware camera records the strike itself'):
+        TrialConditions(video=True, backend='hardware').validate()

@@ -234,3 +234,54 @@ def test_the_record_is_replaced_whole(tmp_path):
     for column in ('run', 'status', 'bag', 'd_t_mm', 'pull_speed_mm_s', 'peak_tip_speed_mps',
                    'max_spring_energy_mJ', 'peak_tip_speed_mps_q05', 'peak_tip_speed_mps_q95'):
         assert column in header
+
+
+class FilmingAnalyst(FakeAnalyst):
+    """The analyst of a study that films: the tip speed from each trial's film's tracks."""
+
+    def __init__(self):
+        super().__init__()
+        self.filmed = []
+
+    def measure(self, bag):
+        raise AssertionError('a filmed trial is measured from its film, not its bag alone')
+
+    def measure_filmed(self, bag, tracks_csv):
+        self.filmed.append((Path(bag).name, Path(tracks_csv)))
+        if len(self.filmed) == 2:
+            return _done({'peak_tendon_force_N': 17.0, 'analysis_note': 'no film in '
+                          f'{bag}/video within 300 s', 'markers_from': ''})
+        return _done({**measured(FakeRig.conditions_of[Path(bag).name]), 'analysis_note': '',
+                      'markers_from': 'video'})
+
+
+def test_a_plan_with_video_films_each_trial_and_measures_it_from_the_film(tmp_path):
+    rig = FakeRig()
+    plan = {**PLAN, 'repeats': 1, 'video': True}
+    setup = StudySetup(plan_from_mapping(plan, 'plan'), tmp_path / 'study')
+    analyst = FilmingAnalyst()
+    StudyRunner(setup, rig, Quiet(), analyst, say=lambda line: None,
+                progress=lambda line: None).run()
+    assert all(values['video'] is True for values in rig.started)
+    rows = _record(tmp_path).rows
+    assert [r['status'] for r in rows] == ['done'] * 4
+    tracks = {name: csv for name, csv in analyst.filmed}
+    for row in rows:
+        assert tracks[Path(row['bag']).name] == tmp_path / 'study' / 'tracks' / \
+            f'{row["video"]}.csv'
+    lost = rows[1]                  # its film never came: said why, no tip speed
+    assert lost['peak_tip_speed_mps'] is None and lost['markers_from'] is None
+    assert 'markers not analysed: no film in' in lost['reason']
+    assert all(r['markers_from'] == 'video' for r in rows if r is not lost)
+
+
+def test_a_plan_with_video_is_refused_on_the_hardware_rig(tmp_path):
+    class HardwareRig(FakeRig):
+        def backend(self):
+            return 'hardware'
+    setup = StudySetup(plan_from_mapping({**PLAN, 'video': True}, 'plan'), tmp_path / 'study')
+    runner = StudyRunner(setup, HardwareRig(), Quiet(), FakeAnalyst(), say=lambda line: None,
+                         progress=lambda line: None)
+    with pytest.raises(StudyError, match='the hardware camera records the strike itself'):
+        runner.open()
+    assert not (tmp_path / 'study').exists()

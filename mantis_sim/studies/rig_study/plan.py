@@ -12,6 +12,7 @@ fixed: {contact_angle_deg: 3.0}          # other conditions, the same for every 
 # hard_to_change: d_t_mm     # split-plot: the factor changed by hand (default d_t_mm)
 # smallest_effect: {peak_tip_speed_mps: 0.5}   # repeats: auto resolves this difference
 # robots: 200                # the twin's robots per combination (its forecast ensemble)
+# video: true                # the simulated rig films each trial; its tip speed from the film
 ```
 
 Orders:
@@ -42,7 +43,7 @@ from mantis_sim.errors import InputError
 CONDITION_KEYS = ('pull_speed_mm_s', 'd_t_mm', 'contact_angle_deg', 'medium')
 ORDERS = ('random', 'as-listed', 'split-plot')
 PLAN_KEYS = ('scene', 'factors', 'repeats', 'order', 'seed', 'fixed', 'hard_to_change',
-             'smallest_effect', 'robots', 'description')
+             'smallest_effect', 'robots', 'description', 'video')
 DEFAULT_ROBOTS = 200
 DEFAULT_HARD_TO_CHANGE = 'd_t_mm'
 MAX_TRIALS = 10_000
@@ -73,6 +74,9 @@ class StudyPlan:
     smallest_effect: dict = field(default_factory=dict)    # quantity -> difference to resolve
     robots: int = DEFAULT_ROBOTS
     description: str = ''
+    #: the simulated rig films each trial (the supervisor's ``video``), and the study takes the
+    #: tip speed and spring energy from the film's tracks instead of the bag's marker frames
+    video: bool = False
 
     @property
     def cells(self) -> list[dict]:
@@ -121,6 +125,8 @@ class StudyPlan:
         out['robots'] = self.robots
         if self.description:
             out['description'] = self.description
+        if self.video:
+            out['video'] = True
         return out
 
 
@@ -173,6 +179,10 @@ def plan_from_mapping(data, where: str,
     description = data.get('description', '')
     if not isinstance(description, str):
         problems.append('description: must be text')
+    video = data.get('video', False)
+    if not isinstance(video, bool):
+        problems.append(f'video: {video!r} is not true or false (true: the simulated rig films '
+                        f'each trial and its tip speed comes from the film)')
     if factors and isinstance(repeats, int):
         total = math.prod(len(v) for v in factors.values()) * repeats
         if total > MAX_TRIALS:
@@ -181,7 +191,8 @@ def plan_from_mapping(data, where: str,
         raise PlanError(f'{where}: the plan cannot run:\n  ' + '\n  '.join(problems))
     return StudyPlan(scene=scene, factors=factors, repeats=repeats, order=order, seed=seed,
                      fixed=fixed, hard_to_change=hard if order == 'split-plot' else None,
-                     smallest_effect=smallest, robots=robots, description=description)
+                     smallest_effect=smallest, robots=robots, description=description,
+                     video=video is True)
 
 
 def _level(name: str, value, problems: list, check_condition) -> Optional[object]:
