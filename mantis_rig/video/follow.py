@@ -106,7 +106,9 @@ class Follower:
         for m in self.markers:
             first.append(self._measure(grey, m, m.last, fast=False))
             if first[-1][0] == first[-1][0]:
-                m.area_px = self._last_area         # its own blob's (measured just now)
+                # its own blob's (measured just now), but no less than half its disc: the
+                # brightest speck of a textured marker can be all its cut keeps
+                m.area_px = max(self._last_area, 0.5 * math.pi * m.radius_px ** 2)
         self.first_xy = np.array(first).reshape(-1, 2)
         for m, xy in zip(self.markers, self.first_xy, strict=True):
             if xy[0] == xy[0]:
