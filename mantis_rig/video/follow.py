@@ -26,6 +26,7 @@ import numpy as np
 from .markers import (
     FrameLevels,
     Window,
+    arc_angle,
     find_markers,
     frame_levels,
     grey_frame,
@@ -50,6 +51,14 @@ RIGID_TOLERANCE_SHARE = 0.03
 # A marker moving more than this many of its radii a frame is smeared into a streak by the
 # exposure: measured as one (markers.measure_streak).
 STREAK_SPEED_RADII = 1.0
+# An arm marker moving more than this many of its radii a frame is measured on its arc about
+# the hinge (Follower._arm_arcs), as is one seen in the last frame and missed in this; a fast
+# one missed is looked for on its arc this much further (rad) for each frame it has been
+# missed, up to so many frames (further on, its arc may hold other things: the
+# re-acquisition's search takes over).
+ARC_SPEED_RADII = 0.5
+ARC_LOST_REACH_RAD = 0.1
+ARC_LOST_FRAMES = 2
 # A blob larger than this many times the marker's own (plus its blur's sweep) is the marker
 # merged with another: a gap.
 MAX_AREA_GROWTH = 1.6
@@ -69,6 +78,7 @@ class _Marker:
     missed: int = 0              # frames missed in a row
     next_search: int = 0         # the frame of the next search for it while missed
     speeding: tuple = (0.0, 0.0)  # (x, y) px per frame per frame, in the strike (else 0)
+    contrast: float = 0.0        # its peak above the link's level at rest (first frame)
 
 
 _NOWHERE = np.full(2, np.nan)
@@ -87,7 +97,7 @@ class Follower:
         self.pivot = None if naming.pivot_px is None else np.array(naming.pivot_px, float)
         self.hinge_ref = None if naming.hinge_px is None else np.array(naming.hinge_px, float)
         lv = self.levels
-        self._last_area = 0.0
+        self._last_area = self._last_contrast = 0.0
         self._expected_xy = [tuple(float(v) for v in naming.positions_px[n]) for n in self.names]
         self.markers: list[_Marker] = []
         for name in self.names:
@@ -109,6 +119,7 @@ class Follower:
                 # its own blob's (measured just now), but no less than half its disc: the
                 # brightest speck of a textured marker can be all its cut keeps
                 m.area_px = max(self._last_area, 0.5 * math.pi * m.radius_px ** 2)
+                m.contrast = self._last_contrast
         self.first_xy = np.array(first).reshape(-1, 2)
         for m, xy in zip(self.markers, self.first_xy, strict=True):
             if xy[0] == xy[0]:
@@ -148,7 +159,10 @@ class Follower:
                     got = measure_streak(grey, w, m.radius_px, self.levels.noise)
                 if got is not None:
                     out[i] = got[:2]
+        self._arm_arcs(grey, out)
         if not self._check_rigid(out):
+            self._arm_arcs(grey, out)       # the arm's markers missed or broken: on their arcs
+            self._check_rigid(out)
             # Markers missed here: where their link, as found, carries them.
             for i in np.flatnonzero(~np.isfinite(out[:, 0])):
                 guess = self._by_link(i, out)
@@ -162,6 +176,48 @@ class Follower:
                 self._reacquire(grey, lost, out, index)
         self._update(out, index)
         return out
+
+    def _arm_arcs(self, grey, out: np.ndarray) -> None:
+        """The arm's fast markers, and those missed here, measured on their arcs: an arm marker
+        stays at its distance from the hinge, so over the exposure it sweeps an arc of its
+        circle about the hinge (carried by the body, found as usual), and where it was is the
+        mean angle of the light on that arc (markers.arc_angle), within the sweep its speed
+        allows. Where the exposure smears it over tens of pixels the window about one
+        predicted point (constant velocity or acceleration) loses it; its circle does not."""
+        fast = [i for i in self.arm
+                if self.markers[i].missed <= ARC_LOST_FRAMES
+                and (math.hypot(*self.markers[i].velocity) > ARC_SPEED_RADII
+                     * self.markers[i].radius_px
+                     or (self.markers[i].missed == 0 and not np.isfinite(out[i, 0])))]
+        if not fast or self.hinge_ref is None:
+            return
+        hinge = self._hinge_now(out)
+        if hinge is None:
+            return
+        body = [tuple(out[i]) for i in self.body if np.isfinite(out[i, 0])]
+        for i in fast:
+            m = self.markers[i]
+            r = float(np.hypot(*(m.ref - self.hinge_ref)))
+            if r < 2 * m.radius_px:
+                continue
+            last = math.atan2(m.last[1] - hinge[1], m.last[0] - hinge[0])
+            ex, ey = self._expected_xy[i]
+            ahead = math.atan2(ey - hinge[1], ex - hinge[0])
+            turn = math.remainder(ahead - last, math.tau)
+            # The streak starts about halfway from its last place (the exposure is nearly the
+            # frame interval) and, in the strike's acceleration, may reach twice as far on as
+            # the prediction: the window runs from a fifth of the turn to two and a half.
+            reach = (1.15 * abs(turn) + 2 * m.radius_px / r
+                     + ARC_LOST_REACH_RAD * min(m.missed, ARC_LOST_FRAMES))
+            # A streak spreads the marker's light over its length: its peak, at rest its
+            # contrast, falls as the marker's width over the streak's; under a quarter of that is
+            # not the marker (a link's edge, a speck).
+            width = 2 * m.radius_px
+            least = 0.25 * m.contrast * width / (width + abs(turn) * r)
+            got = arc_angle(grey, hinge, r, last + 1.35 * turn, reach, m.radius_px,
+                            self.levels.noise, body, least)
+            out[i] = _NOWHERE if got is None else (hinge[0] + r * math.cos(got),
+                                                    hinge[1] + r * math.sin(got))
 
     def _measure(self, grey, m: _Marker, at: np.ndarray, fast: bool = True,
                  own: int | None = None) -> np.ndarray:
@@ -180,7 +236,7 @@ class Follower:
         got = measure_many(grey, [window], self.levels.background)[0]
         if got is None:
             return None
-        self._last_area = got[3]
+        self._last_area, self._last_contrast = got[3], got[2]
         return got[0], got[1]
 
     def _window(self, m: _Marker, at: tuple, own: int | None, fast: bool = True):

@@ -25,7 +25,7 @@ import numpy as np
 from mantis_sim.errors import InputError
 
 __all__ = ['Blob', 'FrameError', 'FrameLevels', 'Window', 'find_markers', 'frame_levels',
-           'grey_frame', 'measure_many', 'measure_near', 'measure_streak']
+           'arc_angle', 'grey_frame', 'measure_many', 'measure_near', 'measure_streak']
 
 # The largest marker looked for (px across), unless told: a screenshot at 15 px/mm shows the
 # rings some 25 px across; the camera's own pixels (6 px/mm) about 10.
@@ -409,3 +409,45 @@ def measure_streak(grey: np.ndarray, window: Window, radius_px: float, noise: fl
     gx = float((w.sum(axis=0) @ np.arange(x1 - x0)) / total)
     gy = float((w.sum(axis=1) @ np.arange(y1 - y0)) / total)
     return gx + x0, gy + y0, peak, float(stats[k, cv2.CC_STAT_AREA])
+
+
+def arc_angle(grey: np.ndarray, centre, radius_px: float, angle: float, reach: float,
+              marker_radius_px: float, noise: float, exclude=(), least_peak: float = 0.0
+              ) -> float | None:
+    """The mean angle (rad, about ``centre``, image axes) of a marker's light on its circle of
+    ``radius_px`` within ``angle`` +/- ``reach``: the white top-hat of the picture (as
+    :func:`measure_streak`) in a band one marker wide along the arc, the discs about the
+    points ``exclude`` (other markers found) left out. None where the arc holds too little
+    light to be the marker, or none brighter than ``least_peak``."""
+    rows, cols = grey.shape
+    band = marker_radius_px + 1.5
+    cx, cy = float(centre[0]), float(centre[1])
+    ts = np.linspace(angle - reach, angle + reach, 9)
+    xs, ys = cx + radius_px * np.cos(ts), cy + radius_px * np.sin(ts)
+    x0 = max(int(math.floor(xs.min() - band - 1)), 0)
+    x1 = min(int(math.ceil(xs.max() + band + 2)), cols)
+    y0 = max(int(math.floor(ys.min() - band - 1)), 0)
+    y1 = min(int(math.ceil(ys.max() + band + 2)), rows)
+    if x1 - x0 < 3 or y1 - y0 < 3:
+        return None
+    patch = grey[y0:y1, x0:x1].astype(np.float32)
+    size = 2 * int(math.ceil(1.6 * marker_radius_px)) + 1
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
+    hat = patch - cv2.morphologyEx(patch, cv2.MORPH_OPEN, disc)
+    gx = np.arange(x0, x1, dtype=np.float32)[None, :] - cx
+    gy = np.arange(y0, y1, dtype=np.float32)[:, None] - cy
+    off = np.remainder(np.arctan2(gy, gx) - angle + math.pi, 2 * math.pi) - math.pi
+    keep = (np.abs(np.hypot(gx, gy) - radius_px) <= band) & (np.abs(off) <= reach)
+    for ox, oy in exclude:
+        keep &= np.hypot(gx + cx - ox, gy + cy - oy) > marker_radius_px + 3
+    hat = np.where(keep, hat, 0.0)
+    peak = float(hat.max()) if hat.size else 0.0
+    if peak < max(6.0 * noise, least_peak):
+        return None
+    w = np.where(hat > max(3.0 * noise, 0.2 * peak), hat, 0.0)
+    total = float(w.sum())
+    # The marker's light: at rest its disc holds about pi r^2 pixels at the peak's level; a
+    # streak spreads the same light thinner. A tenth of it is a marker; less is noise.
+    if total < 0.1 * math.pi * marker_radius_px ** 2 * peak:
+        return None
+    return angle + float(np.sum(w * off) / total)

@@ -173,9 +173,10 @@ def test_a_trial_from_the_installed_executables(install, tmp_path):
 ROSDEP_KEYS = {'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'numba': 'python3-numba',
                'yaml': 'python3-yaml',
                'matplotlib': 'python3-matplotlib', 'serial': 'python3-serial',
-               'statsmodels': 'python3-statsmodels'}
+               'statsmodels': 'python3-statsmodels', 'cv2': 'python3-opencv'}
 PYPI_ONLY = {'mcap', 'mcap_ros2', 'rosbags', 'thorlabs_apt_protocol', 'python_calamine',
-             'nidaqmx', 'dask', 'distributed', 'pyarrow', 'threadpoolctl', 'foxglove'}
+             'nidaqmx', 'dask', 'distributed', 'pyarrow', 'threadpoolctl', 'foxglove',
+             'pycine'}
 
 
 def imported_top_levels() -> set:
