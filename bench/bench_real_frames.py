@@ -107,12 +107,8 @@ def main(folder: Path, write: bool = False) -> int:
 
 
 def _write_section(text: str) -> None:
-    path = ROOT / 'docs' / 'tracking_video.md'
-    doc = path.read_text(encoding='utf-8')
-    head, found, tail = doc.partition(SECTION)
-    rest = tail[tail.find('\n## '):] if found and '\n## ' in tail else ''
-    path.write_text(head.rstrip('\n') + '\n\n' + SECTION + '\n\n' + text.rstrip('\n') + '\n'
-                    + rest, encoding='utf-8')
+    from bench.machine import replace_section
+    replace_section(ROOT / 'docs' / 'tracking_video.md', SECTION, text)
 
 
 if __name__ == '__main__':

@@ -31,7 +31,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from bench.machine import stamp  # noqa: E402
+from bench.machine import replace_section, stamp  # noqa: E402
 from mantis_rig.nodes.ros_env import claim_free_domain, release_domain  # noqa: E402
 from mantis_rig.recording import BagReader  # noqa: E402
 from mantis_rig.study.record import DONE, read_record  # noqa: E402
@@ -181,12 +181,7 @@ def named_tables(studies: list) -> str:
 
 
 def write_docs(text: str) -> None:
-    path = REPO / 'docs' / 'study.md'
-    doc = path.read_text(encoding='utf-8')
-    head, found, tail = doc.partition(SECTION)
-    rest = tail[tail.find('\n## '):] if found and '\n## ' in tail else ''
-    path.write_text(head.rstrip('\n') + '\n\n' + SECTION + '\n\n' + text.rstrip('\n') + '\n'
-                    + rest, encoding='utf-8')
+    replace_section(REPO / 'docs' / 'study.md', SECTION, text)
 
 
 def main() -> None:

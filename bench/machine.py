@@ -35,3 +35,13 @@ def stamp() -> str:
     today = datetime.datetime.now(datetime.UTC).strftime('%Y-%m-%d %H:%M UTC')
     return (f'measured {today} at commit {commit()} on {os.cpu_count()} cores; yardstick '
             f'(sum(range(3e7)), best of 3) {yardstick_s():.2f} s')
+
+
+def replace_section(path: Path, heading: str, text: str) -> None:
+    """Put ``text`` under ``heading`` (a Markdown '## ' line) in ``path``: in place of what was
+    there up to the next '## ' heading, or at the end."""
+    doc = path.read_text(encoding='utf-8')
+    head, found, tail = doc.partition(heading)
+    rest = tail[tail.find('\n## '):] if found and '\n## ' in tail else ''
+    path.write_text(head.rstrip('\n') + '\n\n' + heading + '\n\n' + text.rstrip('\n') + '\n'
+                    + rest, encoding='utf-8')

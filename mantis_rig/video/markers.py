@@ -362,6 +362,16 @@ def _theirs_dark(tile: np.ndarray, planes: list, starts: list, shared: list) -> 
 _RIM = np.ones((5, 5), np.uint8)
 
 
+def _white_top_hat(patch: np.ndarray, marker_radius_px: float) -> np.ndarray:
+    """What an opening with a disc wider than a marker takes away: the narrow bright things (a
+    marker, its streak), without the smooth or wide ones (the links, their smear, the
+    background)."""
+    patch = patch.astype(np.float32)
+    size = 2 * int(math.ceil(1.6 * marker_radius_px)) + 1
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
+    return patch - cv2.morphologyEx(patch, cv2.MORPH_OPEN, disc)
+
+
 def measure_streak(grey: np.ndarray, window: Window, radius_px: float, noise: float
                    ) -> tuple[float, float, float, float] | None:
     """A fast marker smeared by the exposure into a streak along its path, over the smeared
@@ -377,10 +387,7 @@ def measure_streak(grey: np.ndarray, window: Window, radius_px: float, noise: fl
     x1, y1 = min(cx + window.half_px + 1, cols), min(cy + window.half_px + 1, rows)
     if x1 - x0 < 3 or y1 - y0 < 3:
         return None
-    patch = grey[y0:y1, x0:x1].astype(np.float32)
-    size = 2 * int(math.ceil(1.6 * radius_px)) + 1
-    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
-    hat = patch - cv2.morphologyEx(patch, cv2.MORPH_OPEN, disc)
+    hat = _white_top_hat(grey[y0:y1, x0:x1], radius_px)
     x, y = window.x_px - x0, window.y_px - y0
     if window.others:
         along_x = np.arange(x1 - x0, dtype=np.float32)[None, :]
@@ -430,10 +437,7 @@ def arc_angle(grey: np.ndarray, centre, radius_px: float, angle: float, reach: f
     y1 = min(int(math.ceil(ys.max() + band + 2)), rows)
     if x1 - x0 < 3 or y1 - y0 < 3:
         return None
-    patch = grey[y0:y1, x0:x1].astype(np.float32)
-    size = 2 * int(math.ceil(1.6 * marker_radius_px)) + 1
-    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
-    hat = patch - cv2.morphologyEx(patch, cv2.MORPH_OPEN, disc)
+    hat = _white_top_hat(grey[y0:y1, x0:x1], marker_radius_px)
     gx = np.arange(x0, x1, dtype=np.float32)[None, :] - cx
     gy = np.arange(y0, y1, dtype=np.float32)[:, None] - cy
     off = np.remainder(np.arctan2(gy, gx) - angle + math.pi, 2 * math.pi) - math.pi
