@@ -27,7 +27,11 @@ from mantis_sim.conditions import conditions_of_scene
 from mantis_sim.errors import InputError
 from mantis_sim.scene import load_scene
 from mantis_sim.studies.rig_study.effects import auto_repeats
-from mantis_sim.studies.rig_study.forecast import DAY_QUANTITY, StudyForecaster
+from mantis_sim.studies.rig_study.forecast import (
+    DAY_QUANTITY,
+    StudyForecaster,
+    conditions_key,
+)
 from mantis_sim.studies.rig_study.judge import judge
 from mantis_sim.studies.rig_study.plan import CONDITION_KEYS, StudyPlan, plan_from_mapping
 from mantis_sim.studies.rig_study.quantities import MEASUREMENT, QUANTITIES
@@ -226,7 +230,7 @@ class StudyRunner:
             self._ask_ensemble({**self._rig_conditions, **self.plan.conditions_of(cell)})
 
     def _ask_ensemble(self, conditions: dict) -> None:
-        key = _cell_key(conditions)
+        key = conditions_key(conditions)
         if key in self._ensembles:
             return
         if key in self._cached:
@@ -481,7 +485,7 @@ def load_ensembles(directory: Path) -> dict:
     try:
         with open(path, 'rb') as handle:
             ensembles = pickle.load(handle)
-        return {_cell_key(e.conditions): e for e in ensembles}
+        return {conditions_key(e.conditions): e for e in ensembles}
     except (OSError, pickle.UnpicklingError, EOFError, AttributeError, TypeError):
         return {}
 
@@ -506,7 +510,7 @@ def study_forecaster(directory: Path, plan: StudyPlan, rows: list, scene_overrid
     wanted = {}
     for conditions in [conditions_of(plan.conditions_of(c)) for c in plan.cells] + \
             [conditions_of(r) for r in rows]:
-        wanted.setdefault(_cell_key(conditions), conditions)
+        wanted.setdefault(conditions_key(conditions), conditions)
     ensembles = []
     for key, conditions in wanted.items():
         ensemble = cached.get(key)
@@ -544,13 +548,6 @@ def _relative(path: Optional[Path], directory: Path) -> Optional[str]:
     except ValueError:
         return str(path)
 
-
-def _cell_key(conditions: dict) -> tuple:
-    return tuple(sorted((k, _key_value(v)) for k, v in conditions.items()))
-
-
-def _key_value(value) -> str:
-    return f'{float(value):.9g}' if isinstance(value, (int, float)) else str(value)
 
 
 __all__ = ['BAGS', 'Operator', 'PLAN_AS_RUN', 'RigPort', 'StudyError', 'StudyRunner',

@@ -40,15 +40,17 @@ from .forecast import DAY_QUANTITY, Ensemble, StudyForecaster
 DRAWS = 2000
 
 
-def strike_values(ensemble: Ensemble, quantity: str, seats: np.ndarray) -> np.ndarray:
+def strike_values(ensemble: Ensemble, quantity: str, seats: np.ndarray,
+                  rng: np.random.Generator) -> np.ndarray:
     """The ensemble's ``quantity`` at each seat (the latent: interpolated between its robots,
     the end robots beyond the range, as an arm cannot sit beyond the latch); robots that did
-    not strike are left out."""
+    not strike are left out. Without a latent (or fewer than two robots that struck), a
+    robot drawn for each."""
     values = ensemble.values[quantity]
     ok = np.isfinite(values)
     if ensemble.latent is None or ok.sum() < 2:
         return np.full(seats.shape, np.nan) if not ok.any() else \
-            np.random.default_rng(0).choice(values[ok], size=seats.shape)
+            rng.choice(values[ok], size=seats.shape)
     return np.interp(np.clip(seats, ensemble.lower, ensemble.upper), ensemble.latent[ok],
                      values[ok])
 
@@ -64,7 +66,7 @@ def replay_values(forecaster: StudyForecaster, rows: Sequence[Mapping], quantity
     if belief.latent is None:
         for j, row in enumerate(rows):
             ensemble = forecaster.ensemble(conditions_of(row))
-            out[:, j] = strike_values(ensemble, quantity, np.zeros(draws))
+            out[:, j] = strike_values(ensemble, quantity, np.zeros(draws), rng)
         return _with_error(out, forecaster.measurement.get(quantity), rng)
     sds = rng.choice(belief.strike_sds(), size=draws)
     levels = {}
@@ -74,7 +76,8 @@ def replay_values(forecaster: StudyForecaster, rows: Sequence[Mapping], quantity
         levels[day] = forecaster.level_draws(strikes, draws, rng)
     for j, row in enumerate(rows):
         seats = levels[row.get('day')] + sds * rng.normal(0.0, 1.0, draws)
-        out[:, j] = strike_values(forecaster.ensemble(conditions_of(row)), quantity, seats)
+        out[:, j] = strike_values(forecaster.ensemble(conditions_of(row)), quantity, seats,
+                                  rng)
     return _with_error(out, forecaster.measurement.get(quantity), rng)
 
 

@@ -288,23 +288,23 @@ class StudyForecaster:
         return conditions_of_scene(scene_for_conditions(self.scene, conditions))
 
     def add(self, ensemble: Ensemble) -> None:
-        self._ensembles[_key(self.conditions(ensemble.conditions))] = ensemble
+        self._ensembles[conditions_key(self.conditions(ensemble.conditions))] = ensemble
 
     def has(self, conditions: Mapping) -> bool:
-        return _key(self.conditions(conditions)) in self._ensembles
+        return conditions_key(self.conditions(conditions)) in self._ensembles
 
     def ensemble(self, conditions: Mapping) -> Ensemble:
         """The ensemble simulated at exactly these conditions (those given, the scene's for
         the rest): a trial is forecast at the conditions it ran at, whoever set them.
         MissingEnsemble where none was."""
         full = self.conditions(conditions)
-        found = self._ensembles.get(_key(full))
+        found = self._ensembles.get(conditions_key(full))
         if found is None:
             raise MissingEnsemble(full)
         return found
 
     def _within_day(self, conditions: Mapping) -> np.ndarray:
-        key = _key(self.conditions(conditions))
+        key = conditions_key(self.conditions(conditions))
         if key not in self._within:
             self._within[key] = self.belief.within_day_weights(self.ensemble(conditions),
                                                                self._levels)
@@ -351,7 +351,9 @@ class StudyForecaster:
         return picks + rng.uniform(-0.5 * step, 0.5 * step, n)
 
 
-def _key(conditions: Mapping) -> tuple:
+def conditions_key(conditions: Mapping) -> tuple:
+    """A hashable key of a set of conditions: numbers rounded to 9 decimals (19 and 19.0
+    alike), names as text."""
     return tuple(sorted((k, _norm(v)) for k, v in conditions.items()))
 
 
@@ -399,5 +401,5 @@ def _bandwidth(y: np.ndarray) -> float:
 
 
 __all__ = ['DAY_QUANTITY', 'Ensemble', 'Forecast', 'INTERVAL_95', 'LatentBelief',
-           'MissingEnsemble', 'StudyForecaster', 'latent_layout', 'robot_quantities',
-           'simulate_ensemble']
+           'MissingEnsemble', 'StudyForecaster', 'conditions_key', 'latent_layout',
+           'robot_quantities', 'simulate_ensemble']

@@ -4,9 +4,9 @@ tracker export attached later) the last two."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from statistics import NormalDist
 
 import numpy as np
-from scipy.special import ndtri
 
 
 @dataclass(frozen=True)
@@ -60,7 +60,8 @@ class MeasurementError:
     @classmethod
     def normal(cls, bias: float, sd: float, n: int = 15) -> MeasurementError:
         """bias + sd z at the midpoints of n equal parts of a standard normal."""
-        return cls(tuple(float(bias + sd * ndtri((k + 0.5) / n)) for k in range(n)))
+        z = NormalDist()
+        return cls(tuple(bias + sd * z.inv_cdf((k + 0.5) / n) for k in range(n)))
 
     @property
     def bias(self) -> float:
