@@ -12,7 +12,6 @@ Damaged spreadsheets (.xlsx) are covered by test_tracker_export.py (seeded damag
 real exports); the tracker's CSV export is fuzzed here, cell by cell and in its header.
 """
 from collections import Counter
-import os
 from pathlib import Path
 import shutil
 import struct
@@ -20,7 +19,8 @@ import tempfile
 import warnings
 import zlib
 
-from hypothesis import HealthCheck, given, settings
+from fuzzing import both_outcomes, fuzz
+from hypothesis import given
 from hypothesis import strategies as st
 from mcap.reader import make_reader
 import numpy as np
@@ -37,27 +37,7 @@ from mantis_sim.parameters import ParameterError
 from mantis_sim.scene import SceneError, load_scene_file
 
 REPO = Path(__file__).resolve().parents[2]
-settings.register_profile('ci', max_examples=60, derandomize=True, deadline=None,
-                          suppress_health_check=[HealthCheck.too_slow])
-settings.register_profile('long', max_examples=3000, deadline=None,
-                          suppress_health_check=[HealthCheck.too_slow])
-PROFILE = os.environ.get('MANTIS_FUZZ_PROFILE', 'ci')
-
 pytestmark = [pytest.mark.timeout(600), pytest.mark.slow]
-
-
-def fuzz(test):
-    return settings.get_profile(PROFILE)(test)
-
-
-def both_outcomes(outcomes: Counter, accepted: str) -> None:
-    """Each property is checked over its examples as a whole: some inputs must get through
-    (read, loaded or analysed) and some must be refused, or the property proves nothing about
-    one of the two paths (every input refused would pass "analysed plausibly or refused")."""
-    if PROFILE == 'long':
-        print(f'\n{dict(outcomes)}')
-    assert outcomes[accepted] > 0, f'no input was {accepted}: {dict(outcomes)}'
-    assert outcomes['refused'] > 0, f'no input was refused: {dict(outcomes)}'
 
 
 # --------------------------------------------------------------------------- bags

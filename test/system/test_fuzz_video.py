@@ -3,15 +3,15 @@
 file and the frame, never another exception; damaged calibrations load or are refused with the
 calibration's own error naming the file.
 
-Property-based with hypothesis, profiles as in test_fuzz.py (MANTIS_FUZZ_PROFILE=long for the
+Property-based with hypothesis, profiles of test/fuzzing.py (MANTIS_FUZZ_PROFILE=long for the
 long run). The recordings are a simulated strike's first frames, rendered once per module."""
 from collections import Counter
-import os
 from pathlib import Path
 import shutil
 import tempfile
 
-from hypothesis import HealthCheck, given, settings
+from fuzzing import both_outcomes, fuzz
+from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
 import pytest
@@ -24,17 +24,8 @@ from mantis_sim.camera.render import CameraSetup, film_strike
 from mantis_sim.errors import InputError
 from mantis_sim.scene import load_scene
 
-settings.register_profile('ci', max_examples=60, derandomize=True, deadline=None,
-                          suppress_health_check=[HealthCheck.too_slow])
-settings.register_profile('long', max_examples=3000, deadline=None,
-                          suppress_health_check=[HealthCheck.too_slow])
-PROFILE = os.environ.get('MANTIS_FUZZ_PROFILE', 'ci')
 pytestmark = [pytest.mark.timeout(600), pytest.mark.slow]
 RATE_HZ = 2000.0
-
-
-def fuzz(test):
-    return settings.get_profile(PROFILE)(test)
 
 
 @pytest.fixture(scope='module')
@@ -110,7 +101,7 @@ def test_a_recording_with_changed_bytes_is_tracked_or_refused(films, fmt):
             _tracked_or_refused(_damaged_copy(films[fmt], Path(tmp), edits=edits), outcomes)
 
     changed()
-    assert outcomes['tracked'] > 0 and outcomes['refused'] > 0, dict(outcomes)
+    both_outcomes(outcomes, 'tracked')
 
 
 CALIBRATION_FIELDS = ('scale_px_per_mm', 'origin_px', 'tilt_deg', 'handedness', 'name')
@@ -145,7 +136,7 @@ def test_a_calibration_with_any_field_changed_loads_or_is_refused(films):
             outcomes['loaded'] += 1
 
     changed()
-    assert outcomes['loaded'] > 0 and outcomes['refused'] > 0, dict(outcomes)
+    both_outcomes(outcomes, 'loaded')
 
 
 @given(data=st.binary(max_size=300))

@@ -89,22 +89,10 @@ def test_study_attach_tracks_a_video_and_fills_its_trial(film, tmp_path, capsys)
     tracks/, its tip speed the film's (the truth's within 2 %), judged, `markers_from` video."""
     import shutil
 
-    import yaml
+    from study_records import two_trials_done
 
-    from mantis_rig.study.record import StudyRecord, new_row, read_record
-    directory = tmp_path / 'guide'
-    directory.mkdir()
-    (directory / 'plan.yaml').write_text(yaml.safe_dump(
-        {'scene': 'air_23mm_rig', 'factors': {'d_t_mm': [23.0]}, 'repeats': 2,
-         'order': 'as-listed', 'seed': 0, 'robots': 20}))
-    rows = []
-    for k in (1, 2):
-        row = new_row(k, 1, 1, {'d_t_mm': 23.0, 'contact_angle_deg': 3.0, 'medium': 'air',
-                                'pull_speed_mm_s': 2.3})
-        row.update(run=k, status='done', video=f'guide_run{k:03d}_trial{k:03d}',
-                   day='2026-11-28', loading_work_mJ=40.0 + k)
-        rows.append(row)
-    StudyRecord(directory / 'study.csv', rows).save()
+    from mantis_rig.study.record import read_record
+    directory = two_trials_done(tmp_path)
     video = tmp_path / 'videos' / 'guide_run002_trial002.avi'
     video.parent.mkdir()
     shutil.copy(film / 'video.avi', video)

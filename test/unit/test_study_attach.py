@@ -5,35 +5,18 @@ import shutil
 
 from conftest import data_file
 import pytest
-import yaml
+from study_records import two_trials_done
 
 from mantis_rig.cli.main import main
 from mantis_rig.study.attach import attach_exports
-from mantis_rig.study.record import StudyRecord, new_row, read_record
+from mantis_rig.study.record import read_record
 from mantis_sim.errors import InputError
 
 EXPORT = 'real_trials/air_23mm_19kfps_pair_track.csv'      # the authors: 22.96 m/s, 78.1 mJ
-PLAN = {'scene': 'air_23mm_rig', 'factors': {'d_t_mm': [23.0]}, 'repeats': 2,
-        'order': 'as-listed', 'seed': 0, 'robots': 20}
-
-
-def _study(tmp_path):
-    directory = tmp_path / 'guide'
-    directory.mkdir()
-    (directory / 'plan.yaml').write_text(yaml.safe_dump(PLAN))
-    rows = []
-    for k in (1, 2):
-        row = new_row(k, 1, 1, {'d_t_mm': 23.0, 'contact_angle_deg': 3.0, 'medium': 'air',
-                                'pull_speed_mm_s': 2.3})
-        row.update(run=k, status='done', video=f'guide_run{k:03d}_trial{k:03d}',
-                   day='2026-11-28', loading_work_mJ=40.0 + k)
-        rows.append(row)
-    StudyRecord(directory / 'study.csv', rows).save()
-    return directory
 
 
 def test_an_export_fills_its_trial_and_is_judged(tmp_path):
-    directory = _study(tmp_path)
+    directory = two_trials_done(tmp_path)
     export = tmp_path / 'guide_run002_trial002.csv'
     shutil.copy(data_file(EXPORT), export)
     said = []
@@ -49,7 +32,7 @@ def test_an_export_fills_its_trial_and_is_judged(tmp_path):
 
 
 def test_an_export_of_no_trial_is_refused_and_nothing_written(tmp_path):
-    directory = _study(tmp_path)
+    directory = two_trials_done(tmp_path)
     before = (directory / 'study.csv').read_text()
     export = tmp_path / 'guide_run009_trial009.csv'
     shutil.copy(data_file(EXPORT), export)
