@@ -22,7 +22,7 @@ NODES = {
     'loadcell_node': 'mantis_rig.nodes.loadcell_node:main',
     'camera_node': 'mantis_rig.nodes.camera_node:main',
     'supervisor_node': 'mantis_rig.nodes.supervisor_node:main',
-    'sim_rig': 'mantis_rig.nodes.sim_rig:main',
+    'sim_rig': 'mantis_rig.simulated.sim_rig:main',
     'replay_node': 'mantis_rig.nodes.replay_node:main',
 }
 EXISTING_NODES = [

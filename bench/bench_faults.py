@@ -33,7 +33,7 @@ from fault_injection import LAYOUTS, PHASES, SIGNALS, matrix, run_case  # noqa: 
 import rclpy  # noqa: E402
 
 from bench.machine import stamp  # noqa: E402
-from mantis_rig.nodes.ros_env import claim_free_domain, release_domain  # noqa: E402
+from mantis_rig.runtime.ros_env import claim_free_domain, release_domain  # noqa: E402
 
 DOC = REPO / 'docs' / 'reliability.md'
 BEGIN, END = '<!-- bench_faults: begin -->', '<!-- bench_faults: end -->'

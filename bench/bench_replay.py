@@ -22,16 +22,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from mantis_rig.contract import MARKERS, resolve  # noqa: E402
-from mantis_rig.nodes.ros_env import claim_local_domain  # noqa: E402
+from mantis_rig.runtime.ros_env import claim_local_domain  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[1] / 'test' / 'data' / \
     'air_23mm_2p3mmps_trial1_markers.csv.gz'
 SUBSCRIBER = '''
 import sys, time, rclpy
 from mantis_rig.recording import BagReader
-from mantis_rig.recording.interfaces import message_class
+from mantis_rig.recording.message_types import message_class
 from mantis_rig.replay import replay_qos
-from mantis_rig.recording.qos import parse_offered_qos_string
+from mantis_rig.recording.offered_qos import parse_offered_qos_string
 from rclpy.qos import QoSProfile
 rclpy.init()
 node = rclpy.create_node('bench_subscriber')

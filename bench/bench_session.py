@@ -30,8 +30,8 @@ import rclpy  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 
 from bench.machine import stamp  # noqa: E402
-from mantis_rig.nodes.ros_env import claim_free_domain, release_domain  # noqa: E402
 from mantis_rig.nodes.trial_client import TrialClient  # noqa: E402
+from mantis_rig.runtime.ros_env import claim_free_domain, release_domain  # noqa: E402
 
 TRIAL_TIMEOUT_S = 300.0
 TICKS_PER_S = os.sysconf('SC_CLK_TCK')

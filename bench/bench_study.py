@@ -30,10 +30,10 @@ import rclpy  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 
 from bench.machine import stamp  # noqa: E402
-from mantis_rig.nodes.executors import Spinner  # noqa: E402
-from mantis_rig.nodes.ros_env import claim_free_domain, release_domain  # noqa: E402
 from mantis_rig.nodes.trial_client import TrialClient  # noqa: E402
-from mantis_rig.study.record import read_record  # noqa: E402
+from mantis_rig.runtime.executors import Spinner  # noqa: E402
+from mantis_rig.runtime.ros_env import claim_free_domain, release_domain  # noqa: E402
+from mantis_rig.study_session.record import read_record  # noqa: E402
 from mantis_sim.studies.rig_study.plan import plan_from_mapping  # noqa: E402
 
 SECTION = '## A study'

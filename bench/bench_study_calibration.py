@@ -11,7 +11,7 @@ speed at two levels, an order (random, as-listed, split-plot), 2 to 4 repeats. T
 are the issue's own plans (docs/study.md's, and contact angle x guide distance split-plot).
 The truth of each trial is the robot the simulated world built for it (its conditions and the
 arm's seat on the latch, from the world's diagnostics in the bag), integrated as the
-ensembles are. The tallies are mantis_sim.studies.rig_study.calibration's.
+ensembles are. The tallies are mantis_sim.studies.rig_study.verdict_calibration's.
 
 --chain measures the simulated rig's measuring chain only (measured against true values), on
 seeds of its own (it sets quantities.SIMULATED_RIG_ERROR; the calibration runs on others).
@@ -32,13 +32,13 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from bench.machine import replace_section, stamp  # noqa: E402
-from mantis_rig.nodes.ros_env import claim_free_domain, release_domain  # noqa: E402
 from mantis_rig.recording import BagReader  # noqa: E402
-from mantis_rig.study.record import DONE, read_record  # noqa: E402
-from mantis_sim.conditions import scene_for_conditions  # noqa: E402
+from mantis_rig.runtime.ros_env import claim_free_domain, release_domain  # noqa: E402
+from mantis_rig.study_session.record import DONE, read_record  # noqa: E402
 from mantis_sim.robots import SessionRobots  # noqa: E402
 from mantis_sim.scene import load_scene  # noqa: E402
-from mantis_sim.studies.rig_study.calibration import (  # noqa: E402
+from mantis_sim.studies.rig_study.quantities import QUANTITIES  # noqa: E402
+from mantis_sim.studies.rig_study.verdict_calibration import (  # noqa: E402
     CENTRAL_50,
     CENTRAL_95,
     Coverage,
@@ -47,7 +47,7 @@ from mantis_sim.studies.rig_study.calibration import (  # noqa: E402
     trial_coverage,
     true_quantities,
 )
-from mantis_sim.studies.rig_study.quantities import QUANTITIES  # noqa: E402
+from mantis_sim.trial_conditions import scene_for_conditions  # noqa: E402
 
 SCENE = 'air_23mm_rig'
 SECTION = '## Calibration on known truth'

@@ -8,7 +8,7 @@ Three processes on one local ROS domain, each measured on its own from /proc/<pi
 * the source: ``ni`` (default) = loadcell_node, the DAQ node as it runs on the rig (backend
   ``hardware``, the NI-DAQmx code path), over the test suite's fake of nidaqmx
   (test/fakes_nidaq) paced to deliver samples no faster than the wall clock, as the USB-6363
-  does; ``sim`` = the simulated rig (mantis_rig.nodes.sim_rig: the world and loadcell_node
+  does; ``sim`` = the simulated rig (mantis_rig.simulated.sim_rig: the world and loadcell_node
   with the simulated backend, in one process); ``synthetic`` = a
   bare publisher of force blocks standing in for the DAQ node. The DAQ node is configured and
   activated here through its lifecycle services.
@@ -106,8 +106,8 @@ def role_ni_daq(args) -> int:
 
     system = PacedDaq(signal_v=lambda index: 0.9 + 0.001 * np.sin(index * 1e-3))
     sys.modules.update(system.modules())
-    from mantis_rig.nodes.executors import run_node
     from mantis_rig.nodes.loadcell_node import LoadcellNode
+    from mantis_rig.runtime.executors import run_node
     return run_node(LoadcellNode, args=[sys.argv[0], '--ros-args', '-p', 'backend:=hardware',
                                  '-p', f'sample_rate_hz:={args.rate}',
                                  *(['-p', f'block_size:={args.block_size}']
@@ -207,7 +207,7 @@ def main(argv=None) -> int:
                         help=argparse.SUPPRESS)
     parser.add_argument('--bag', help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    from mantis_rig.nodes.ros_env import claim_local_domain
+    from mantis_rig.runtime.ros_env import claim_local_domain
     claim_local_domain()
     if args.role == 'recorder':
         return role_recorder(args)
@@ -233,7 +233,7 @@ def main(argv=None) -> int:
                    '-p', f'sample_rate_hz:={args.rate}']
             if args.block_size:
                 ros += ['-p', f'block_size:={args.block_size}']
-            processes['daq'] = spawn([sys.executable, '-m', 'mantis_rig.nodes.sim_rig', *ros],
+            processes['daq'] = spawn([sys.executable, '-m', 'mantis_rig.simulated.sim_rig', *ros],
                                      logs['daq'])
             lifecycle('loadcell_node', (1, 3))           # configure, activate
         elif args.source == 'ni':

@@ -37,7 +37,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mantis_rig.analysis.inputs import read_trial  # noqa: E402
-from mantis_rig.analysis.trial import analyse_trial  # noqa: E402
+from mantis_rig.analysis.one_trial import analyse_trial  # noqa: E402
 from mantis_rig.video.recording import open_recording  # noqa: E402
 from mantis_rig.video.track import track, write_tracks  # noqa: E402
 from mantis_sim.camera.calibration import load_calibration  # noqa: E402

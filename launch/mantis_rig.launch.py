@@ -13,7 +13,7 @@ and `supervisor_node`, a process each. One params file with a section per node, 
 and activates them. Other supervisor parameters: `ros2 param set /supervisor_node ...`.
 
 A node process that ends ends the stack (as `mantis bringup` does): an OnProcessExit handler per
-node (mantis_rig.nodes.watchdog.LaunchWatch) logs one line naming the process and the signal or
+node (mantis_rig.stack.watchdog.LaunchWatch) logs one line naming the process and the signal or
 exit status, gives that line to the supervisor as its trial's abort reason, stops the stage at
 the KDC101's port when the stage node's own process died on hardware, and shuts the launch down
 (the other nodes get SIGINT: the stage node stops the stage, the supervisor aborts its trial and
@@ -55,8 +55,8 @@ from mantis_rig.contract import (
     STAGE_NODE,
     SUPERVISOR_NODE,
 )
-from mantis_rig.nodes.stopping import STOP_REASON_ENV
-from mantis_rig.nodes.watchdog import LaunchWatch
+from mantis_rig.runtime.stopping import STOP_REASON_ENV
+from mantis_rig.stack.watchdog import LaunchWatch
 
 WATCH_PERIOD_S = 0.5        # how often the node processes' /proc state is looked at
 

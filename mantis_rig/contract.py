@@ -11,7 +11,7 @@ the rig's namespace (:func:`bag_namespace`, :func:`resolve`).
 
 QoS: one profile per kind of stream (:class:`StreamQos`); publishers and subscribers of a topic
 both take theirs from its kind, so they always match (reliability and durability are what DDS
-matches; nothing reports a mismatch between two of our nodes, mantis_rig/nodes/lean_node.py).
+matches; nothing reports a mismatch between two of our nodes, mantis_rig/runtime/lean_node.py).
 Every kind is reliable: there are no best-effort publishers.
 
 No ROS import at module level (rclpy is imported only to build a QoSProfile), and nothing of
@@ -347,7 +347,7 @@ def check_backend(backend: str) -> str:
     """`backend` if it is one of BACKENDS, else a ConfigurationError naming the valid ones
     (the `backend` parameter's check, and hardware.backends' before it builds a device)."""
     if backend not in BACKENDS:
-        from mantis_rig.errors import ConfigurationError
+        from mantis_rig.faults import ConfigurationError
         raise ConfigurationError(f'unknown backend {backend!r}; valid backends: '
                                  f'{", ".join(BACKENDS)}')
     return backend
@@ -380,7 +380,7 @@ DEFAULT_SCENE = 'air_23mm_rig'
 DEFAULT_SERIAL_PORT = '/dev/ttyUSB0'
 DEFAULT_TRIGGER_OUTPUT = 'Dev1/port0/line0'
 MEDIA = ('air', 'water', 'vacuum')
-# the stage driver's envelope (mantis_rig.hardware.interfaces.StageLimits, checked by a test)
+# the stage driver's envelope (mantis_rig.hardware.device_interfaces.StageLimits, checked by a test)
 STAGE_MAX_SPEED_M_PER_S = 2.4e-3
 STAGE_TRAVEL_M = (0.5e-3, 24.5e-3)
 MAX_SPEED_MM_S = STAGE_MAX_SPEED_M_PER_S * 1e3
@@ -475,7 +475,7 @@ CAMERA_PARAMETERS = (
               'hardware, whose camera records itself'),
 )
 #: the trial conditions the simulated world builds each latching's robot from
-#: (mantis_sim.conditions); the supervisor sets them before each simulated trial, and the world
+#: (mantis_sim.trial_conditions); the supervisor sets them before each simulated trial, and the world
 #: takes them only while its robot is latched and unloaded
 WORLD_CONDITIONS = (
     ParamSpec('d_t_mm', 23.0, 'mm', 'the robot\'s tendon guide distance from the body pivot '

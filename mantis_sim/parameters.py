@@ -127,7 +127,7 @@ class Damping:
 
 
 #: The media a robot strikes in and their densities (g/mm^3): the one table a medium's name is
-#: given its density from (mantis_sim.conditions). Water: 750 x air, as in the authors' fits.
+#: given its density from (mantis_sim.trial_conditions). Water: 750 x air, as in the authors' fits.
 MEDIUM_DENSITIES_G_PER_MM3 = {'air': 1.225e-6, 'water': 750 * 1.225e-6, 'vacuum': 0.0}
 
 

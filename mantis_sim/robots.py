@@ -109,7 +109,7 @@ class SessionRobots:
 
     def __call__(self, latching: int, base: Scene | None = None) -> Scene:
         """The robot of the n-th latching, drawn about ``base`` (default: the session's scene),
-        e.g. the scene at a trial's conditions (mantis_sim.conditions): the same draw for the
+        e.g. the scene at a trial's conditions (mantis_sim.trial_conditions): the same draw for the
         same latching whatever the base, kept within the latent's range for the base's
         contact angle."""
         base = self.scene if base is None else base

@@ -26,7 +26,7 @@ import subprocess
 import pytest
 
 from mantis_rig.contract import MARKERS, resolve
-from mantis_rig.nodes.ros_env import claim_free_domain, release_domain
+from mantis_rig.runtime.ros_env import claim_free_domain, release_domain
 
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')

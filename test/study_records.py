@@ -4,7 +4,7 @@ from pathlib import Path
 
 import yaml
 
-from mantis_rig.study.record import StudyRecord, new_row
+from mantis_rig.study_session.record import StudyRecord, new_row
 
 PLAN = {'scene': 'air_23mm_rig', 'factors': {'d_t_mm': [23.0]}, 'repeats': 2,
         'order': 'as-listed', 'seed': 0, 'robots': 20}

@@ -12,6 +12,8 @@ The layers, as ``docs/architecture.md`` lays them out:
   its conditions, the pipeline, refused or analysed with warnings);
 - :mod:`.batch`: many trials, one table row each; :mod:`.intervals`, :mod:`.plots` on top.
 """
+from mantis_rig.analysis.one_trial import TrialRefused, analyse_trial
+
 from .energy import InertiaParams
 from .inputs import (
     MarkerTracks,
@@ -24,7 +26,6 @@ from .inputs import (
 )
 from .kinematics import LinkageFit, fit_linkage, tip_speed_mps
 from .pipeline import AnalysisParams, TrialAnalysis, analyze_angles, analyze_tracks
-from .trial import TrialRefused, analyse_trial
 
 __all__ = [
     'AnalysisParams', 'InertiaParams', 'LinkageFit', 'MarkerTracks', 'TrackFormatError',

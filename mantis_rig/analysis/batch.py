@@ -30,11 +30,11 @@ import warnings
 
 import numpy as np
 
+from mantis_rig.analysis.one_trial import TrialRefused, analyse_trial
 from mantis_sim.errors import InputError
 
 from ..recording import BagError
 from .inputs import TrackFormatError, read_trial
-from .trial import TrialRefused, analyse_trial
 
 TRACKING_SUFFIXES = ('.xlsx', '.csv', '.csv.gz')
 PHASES = ('I', 'II', 'III', 'IV')

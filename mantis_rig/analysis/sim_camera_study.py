@@ -16,12 +16,12 @@ import math
 
 import numpy as np
 
+from mantis_rig.analysis.bag_conditions import params_for_trial
 from mantis_sim.results import simulate
 from mantis_sim.scene import Scene, load_scene
 from mantis_sim.sensors import CameraSensor
 from mantis_sim.world import World
 
-from .conditions import params_for_trial
 from .inputs import MarkerTracks
 from .pipeline import analyze_tracks
 

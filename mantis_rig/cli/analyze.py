@@ -6,6 +6,7 @@ import math
 from pathlib import Path
 import sys
 
+from mantis_rig.cli.track_command import add_video_options
 from mantis_sim.errors import InputError
 
 from .options import (
@@ -17,7 +18,6 @@ from .options import (
     json_safe,
     positive_int,
 )
-from .track import add_video_options
 
 #: Re-trackings of `mantis analyze --intervals` without N (each costs one analysis).
 INTERVAL_REPLICAS = 40
@@ -138,8 +138,9 @@ def _analyze_video(args, given, options) -> int:
     """Track the recording (as `mantis track`), then analyse its tracks as an export's."""
     import tempfile
 
+    from mantis_rig.cli.track_command import track_video
+
     from ..analysis.inputs import read_trial
-    from .track import track_video
     if any(v is not None for v in options.values()):
         raise InputError(f'{args.path} is a recording: give its rate with --rate and its '
                          'scale with --calibration (--frame-rate and --length-unit are for '
@@ -155,7 +156,7 @@ def _analyze_video(args, given, options) -> int:
 
 
 def _analyze_trial(args, trial, given) -> int:
-    from ..analysis.trial import TrialRefused, analyse_trial
+    from mantis_rig.analysis.one_trial import TrialRefused, analyse_trial
     if trial.problems:
         err('analyze', f'warning: {args.path} is damaged: {"; ".join(trial.problems)}')
         err('analyze', f'warning: analysing the {trial.tracks.n_frames} frames recorded '
@@ -172,7 +173,7 @@ def _analyze_trial(args, trial, given) -> int:
         report['intervals'] = track_intervals(trial.tracks, analysis, args.intervals,
                                               args.seed, _analyses_shown()).to_json()
     if args.plot:
-        from ..analysis.plots import plot_trial
+        from mantis_rig.analysis.trial_figure import plot_trial
         plot_trial(analysis, args.plot, title=Path(args.path).name)
     if args.json:
         print(json.dumps(json_safe(report), indent=2))

@@ -16,10 +16,16 @@ from pathlib import Path
 import sys
 import time
 
+from mantis_rig.cli.trial_commands import NAMESPACE, _typed
+from mantis_rig.faults import RIG_FAULT, USAGE_ERROR, StackError
+from mantis_rig.trial.supervisor_settings import (
+    PARAMETERS,
+    ConditionError,
+    TrialConditions,
+    check_value,
+)
+
 from ..contract import START_TRIAL, resolve
-from ..errors import RIG_FAULT, USAGE_ERROR, StackError
-from ..trial.conditions import PARAMETERS, ConditionError, TrialConditions, check_value
-from .trial import NAMESPACE, _typed
 
 REACH_TIMEOUT_S = 10.0        # default: how long the supervisor has to answer
 STATUS_WAIT_S = 5.0           # how long the supervisor's status may lag behind its state
@@ -166,8 +172,9 @@ def rig_client(args):
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
-    from ..nodes.executors import Spinner
-    from ..nodes.ros_env import claim_local_domain
+    from mantis_rig.runtime.executors import Spinner
+    from mantis_rig.runtime.ros_env import claim_local_domain
+
     from ..nodes.trial_client import TrialClient
 
     if args.namespace and not NAMESPACE.fullmatch(args.namespace):

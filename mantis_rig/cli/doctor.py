@@ -222,15 +222,15 @@ class HardwareRig:
 
     def make_stage(self, choice):
         """choice: the port choose_stage_port chose (discovery.StageChoice)."""
-        from ..hardware.backends import make_stage
+        from mantis_rig.backends import make_stage
         return make_stage('hardware', choice=choice, counts_per_mm=self.params.counts_per_mm)
 
     def make_daq(self):
-        from ..hardware.backends import make_force_daq
+        from mantis_rig.backends import make_force_daq
         return make_force_daq('hardware', config=self.params.daq_config())
 
     def make_trigger(self):
-        from ..hardware.backends import make_camera_trigger
+        from mantis_rig.backends import make_camera_trigger
         return make_camera_trigger('hardware', output=self.params.trigger_output)
 
 
@@ -246,10 +246,9 @@ class SimRig:
         self.runner = None
 
     def __enter__(self):
+        from mantis_rig.simulated.local_world import LocalWorldPort, WorldRunner
         from mantis_sim.scene import load_scene
         from mantis_sim.world import World
-
-        from ..hardware.local_world import LocalWorldPort, WorldRunner
         self.scene = load_scene(self.params.scene, list(self.params.scene_overrides))
         self.runner = WorldRunner(World(self.scene),
                                   real_time_factor=self.options.real_time_factor).start()
@@ -266,16 +265,16 @@ class SimRig:
         return float(self.port.tendon_force(self.port.now_s(), 1.0, 1, 10.0)[0])
 
     def make_stage(self, choice=None):
-        from ..hardware.backends import make_stage
+        from mantis_rig.backends import make_stage
         return make_stage('sim', self.port)
 
     def make_daq(self):
-        from ..hardware.backends import make_force_daq
+        from mantis_rig.backends import make_force_daq
         return make_force_daq('sim', self.port, scene=self.scene, seed=self.params.seed,
                               config=self.params.daq_config())
 
     def make_trigger(self):
-        from ..hardware.backends import make_camera_trigger
+        from mantis_rig.backends import make_camera_trigger
         return make_camera_trigger('sim', self.port, scene=self.scene)
 
 
@@ -356,7 +355,8 @@ def kind_code(channel: str) -> str:
 
 def check_loadcell(report: Report, options: Options, rig, view) -> bool:
     """The channel, then 1 s at rest. True when the load cell can feed the force ceiling."""
-    from ..hardware.interfaces import ConfigurationError, DeviceError
+    from mantis_rig.hardware.device_interfaces import ConfigurationError, DeviceError
+
     from ..hardware.nidaq_force import validate_config
     params = options.params
     name = 'load cell'
@@ -462,7 +462,8 @@ def _judge_rest(report: Report, name, params, blocks, overrun_count, truth_n=0.0
 # --- camera trigger -----------------------------------------------------------------------------
 
 def check_camera(report: Report, options: Options, rig, view) -> None:
-    from ..hardware.interfaces import CameraConfig, ConfigurationError, DeviceError
+    from mantis_rig.hardware.device_interfaces import CameraConfig, ConfigurationError, DeviceError
+
     from ..hardware.nidaq import parse_trigger_output
     output = options.params.trigger_output
     name = 'camera trigger'
@@ -548,7 +549,7 @@ def choose_stage_port(report: Report, params):
 
 
 def check_stage(report: Report, options: Options, rig, loadcell_ok: bool) -> None:
-    from ..hardware.interfaces import DeviceError
+    from mantis_rig.hardware.device_interfaces import DeviceError
     params = options.params
     if rig.sim:
         choice, port = None, 'simulated'
@@ -600,8 +601,9 @@ def _normalized(part: str) -> str:
 
 
 def _check_stage_type(report: Report, stage, params, rig) -> bool:
+    from mantis_rig.hardware.device_interfaces import STAGE_TRAVEL_M, DeviceError
+
     from ..hardware.apt_units import Z8_COUNTS_PER_MM
-    from ..hardware.interfaces import STAGE_TRAVEL_M, DeviceError
     name = 'stage: type'
     counts_per_mm = params.counts_per_mm or Z8_COUNTS_PER_MM
     soft_max_mm = stage.limits.max_position_m * 1e3
@@ -651,7 +653,8 @@ def _check_stage_type(report: Report, stage, params, rig) -> bool:
 
 
 def _check_stage_limits(report: Report, stage, params) -> bool:
-    from ..hardware.interfaces import DeviceError
+    from mantis_rig.hardware.device_interfaces import DeviceError
+
     from ..trial.safety_limits import FORCE_CEILING_RANGE_N
     limits = stage.limits
     enforced = (f'soft travel [{limits.min_position_m * 1e3:g}, '
@@ -706,7 +709,7 @@ class _ForceFeed:
         return self
 
     def _run(self):
-        from ..hardware.interfaces import DeviceError
+        from mantis_rig.hardware.device_interfaces import DeviceError
         timeout_s = 2.0 + self.params.block_size / self.params.sample_rate_hz
         try:
             while not self._stop.is_set():
@@ -735,7 +738,7 @@ class _ForceFeed:
 
 
 def _check_motion(report: Report, options: Options, rig, stage, loadcell_ok: bool) -> None:
-    from ..hardware.interfaces import ConfigurationError, DeviceError, StageGuard
+    from mantis_rig.hardware.device_interfaces import ConfigurationError, DeviceError, StageGuard
     name = 'stage: motion'
     params = options.params
     if not loadcell_ok:
@@ -786,7 +789,7 @@ def _check_motion(report: Report, options: Options, rig, stage, loadcell_ok: boo
 
 def _stop_and_say(guard, stage) -> str:
     """Stop the stage (a failed check never leaves it moving) and say how that went."""
-    from ..hardware.interfaces import DeviceError
+    from mantis_rig.hardware.device_interfaces import DeviceError
     try:
         guard.stop()
         state = stage.state()

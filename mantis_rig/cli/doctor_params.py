@@ -16,6 +16,7 @@ import math
 from pathlib import Path
 from typing import Optional
 
+from mantis_rig.hardware.device_interfaces import DaqConfig
 from mantis_sim.errors import InputError
 
 from ..contract import (
@@ -30,7 +31,6 @@ from ..contract import (
     STAGE_NODE,
     SUPERVISOR_NODE,
 )
-from ..hardware.interfaces import DaqConfig
 from ..trial.safety_limits import FORCE_CEILING_DEFAULT_N, FORCE_CEILING_RANGE_N
 
 #: What the Futek LSB302 + IAA100 at rest should read with the tendon slack, untared: the

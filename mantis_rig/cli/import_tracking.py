@@ -13,9 +13,10 @@ from .options import (
 
 
 def run_import(args) -> int:
+    from mantis_rig.analysis.one_trial import TrialRefused, analyse_trial
+
     from ..analysis.inputs import TrialInput, load_tracks
     from ..analysis.inputs.bag_writer import write_tracking_bag
-    from ..analysis.trial import TrialRefused, analyse_trial
 
     given = given_conditions(args)
     try:

@@ -7,21 +7,21 @@ import sys
 from mantis_sim.errors import InputError
 from mantis_sim.model import SimulationError
 
-from ..errors import RIG_FAULT, USAGE_ERROR, RigFault
+from ..faults import RIG_FAULT, USAGE_ERROR, RigFault
 from . import (
     analyze,
     control,
-    day_state,
+    day_state_command,
     doctor,
-    identify,
     import_tracking,
-    recover,
+    real_strike_commands,
+    recover_command,
     replay,
     sim,
     study,
-    sweep,
-    track,
-    trial,
+    sweep_commands,
+    track_command,
+    trial_commands,
 )
 
 EXIT_STATUSES = f"""exit status:
@@ -43,16 +43,16 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_commands(commands)
     replay.add_commands(commands)
     import_tracking.add_commands(commands)
-    track.add_commands(commands)
+    track_command.add_commands(commands)
     analyze.add_commands(commands)
-    recover.add_commands(commands)
-    trial.add_commands(commands)
+    recover_command.add_commands(commands)
+    trial_commands.add_commands(commands)
     control.add_commands(commands)
     study.add_commands(commands)
-    sweep.add_commands(commands)
+    sweep_commands.add_commands(commands)
     doctor.add_commands(commands)
-    identify.add_commands(commands)
-    day_state.add_commands(commands)
+    real_strike_commands.add_commands(commands)
+    day_state_command.add_commands(commands)
     return parser
 
 

@@ -105,8 +105,8 @@ def export_options(args) -> dict:
 
 def given_conditions(args) -> dict:
     """The trial conditions given as options, checked against their ranges (ConditionError)."""
-    from ..analysis.conditions import CONDITION_OPTIONS
-    from ..trial.conditions import ConditionError, check_value
+    from mantis_rig.analysis.bag_conditions import CONDITION_OPTIONS
+    from mantis_rig.trial.supervisor_settings import ConditionError, check_value
 
     given = {}
     for name, option in CONDITION_OPTIONS.items():

@@ -9,7 +9,8 @@ from .options import err
 def run_replay(args) -> int:
     import rclpy
 
-    from ..nodes.ros_env import claim_local_domain
+    from mantis_rig.runtime.ros_env import claim_local_domain
+
     from ..replay import BagPlayer
     from ..replay.schedule import raise_priority
 
@@ -24,9 +25,10 @@ def run_replay(args) -> int:
                            'priority')
     from rclpy.signals import SignalHandlerOptions
 
+    from mantis_rig.runtime.lean_node import LeanNode
+    from mantis_rig.runtime.stopping import StopRequested, StopSignals
+
     from ..contract import REPLAY_NODE
-    from ..nodes.lean_node import LeanNode
-    from ..nodes.stopping import StopRequested, StopSignals
     signals = StopSignals('mantis replay').install()    # 130 / 143, not rclpy's handler
     rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO)
     node = LeanNode(REPLAY_NODE)

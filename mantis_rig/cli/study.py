@@ -5,11 +5,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from mantis_rig.cli.track_command import add_video_options
+from mantis_rig.cli.trial_commands import PROCESSES
+from mantis_rig.faults import RIG_FAULT, USAGE_ERROR
 from mantis_sim.errors import InputError
-
-from ..errors import RIG_FAULT, USAGE_ERROR
-from .track import add_video_options
-from .trial import PROCESSES
 
 USAGE = """mantis study PLAN --out DIR [options]     run (or resume) a study on a rig
        mantis study attach DIR FILES...        fill rows from the videos or their exports
@@ -69,14 +68,13 @@ def run_study(args) -> int:
                          f'(attach and report are `mantis study attach|report DIR`)')
     if args.out is None:
         raise InputError('mantis study PLAN needs --out DIR (the study\'s directory)')
+    from mantis_rig.trial.supervisor_settings import check_value
     from mantis_sim.studies.rig_study.plan import load_plan
-
-    from ..trial.conditions import check_value
     plan = load_plan(args.plan, check_condition=check_value)
     if args.connect:
-        from ..study.session import run_connected
+        from mantis_rig.study_session.session import run_connected
         return run_connected(plan, args)
-    from ..study.session import run_with_stack
+    from mantis_rig.study_session.session import run_with_stack
     return run_with_stack(plan, args)
 
 
@@ -87,12 +85,12 @@ def _directory(args) -> Path:
 
 
 def _attach(args) -> int:
-    from ..study.attach import attach_exports
+    from mantis_rig.study_session.attach import attach_exports
     directory = _directory(args)
     exports = [Path(p) for p in args.rest[1:]]
     if not exports:
         raise InputError('mantis study attach DIR FILES...: no video or export given')
-    from .track import track_video
+    from mantis_rig.cli.track_command import track_video
 
     def tracked(video: Path, out: Path) -> Path:
         return track_video(args, video, out, label='study attach').csv
@@ -102,7 +100,7 @@ def _attach(args) -> int:
 
 
 def _report(args) -> int:
-    from ..study.report import write_report
+    from mantis_rig.study_session.report import write_report
     directory = _directory(args)
     written = write_report(directory, say=print)
     print(f'report: {written}')

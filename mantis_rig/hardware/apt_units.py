@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import math
 from typing import Optional
 
-from .interfaces import ConfigurationError
+from mantis_rig.hardware.device_interfaces import ConfigurationError
 
 SAMPLE_PERIOD_S = 2048 / 6e6
 FIXED_POINT_SCALE = 2 ** 16

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import importlib
 from typing import Optional
 
-from .interfaces import DeviceError
+from mantis_rig.hardware.device_interfaces import DeviceError
 
 THORLABS_FTDI_VID = 0x0403          # FTDI
 THORLABS_APT_PID = 0xFAF0           # the product id Thorlabs' APT controllers enumerate with

@@ -31,8 +31,7 @@ import serial
 import thorlabs_apt_protocol as apt
 from thorlabs_apt_protocol.parsing import id_to_func
 
-from .apt_units import Z8_COUNTS_PER_MM, AptScale
-from .interfaces import (
+from mantis_rig.hardware.device_interfaces import (
     ConfigurationError,
     DeviceError,
     SafetyLimitError,
@@ -41,6 +40,8 @@ from .interfaces import (
     StageLimits,
     StageState,
 )
+
+from .apt_units import Z8_COUNTS_PER_MM, AptScale
 
 log = logging.getLogger(__name__)
 

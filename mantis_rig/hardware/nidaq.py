@@ -18,7 +18,7 @@ import logging
 import re
 from typing import NamedTuple
 
-from mantis_rig.hardware.interfaces import ConfigurationError, DeviceError
+from mantis_rig.hardware.device_interfaces import ConfigurationError, DeviceError
 
 log = logging.getLogger(__name__)
 

@@ -10,7 +10,7 @@ from typing import Optional
 
 import numpy as np
 
-from mantis_rig.hardware.interfaces import (
+from mantis_rig.hardware.device_interfaces import (
     ConfigurationError,
     DaqConfig,
     DeviceError,

@@ -6,7 +6,7 @@ import math
 import time
 from typing import Optional
 
-from mantis_rig.hardware.interfaces import (
+from mantis_rig.hardware.device_interfaces import (
     CameraConfig,
     CameraStatus,
     CameraTrigger,

@@ -10,12 +10,12 @@ not keep up, so a slow viewer never slows the rig. A Foxglove layout for a trial
 """
 from __future__ import annotations
 
+from mantis_rig.recording.message_types import message_class
+from mantis_rig.runtime.executors import Spinner, light_executor
 from mantis_sim.errors import InputError
 
 from ..contract import LIVE_RELAY_NODE, resolve
-from ..nodes.executors import Spinner, light_executor
 from ..nodes.recorder import TRIAL_TOPICS, subscription_qos
-from ..recording.interfaces import message_class
 from ..recording.message_definition import SCHEMA_ENCODING, full_message_definition
 
 DEFAULT_HOST = '127.0.0.1'
@@ -50,7 +50,7 @@ class LiveRelay:
         named by the topic's full name there."""
         import foxglove
 
-        from ..nodes.lean_node import LeanNode
+        from mantis_rig.runtime.lean_node import LeanNode
 
         host, port = parse_address(address)
         self._foxglove = foxglove.Context()

@@ -27,13 +27,12 @@ from sensor_msgs.msg import TimeReference
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
-from mantis_rig import contract
-from mantis_rig.hardware import backends
-from mantis_rig.hardware.interfaces import CameraConfig, ConfigurationError, DeviceError
-from mantis_rig.hardware.sim_camera import FilmError
+from mantis_rig import backends, contract
+from mantis_rig.hardware.device_interfaces import CameraConfig, ConfigurationError, DeviceError
 from mantis_rig.nodes.device_node import DeviceNode, time_msg
-from mantis_rig.nodes.executors import run_node
 from mantis_rig.recording.marker_block import MarkerFrames, marker_blocks_to_msgs
+from mantis_rig.runtime.executors import run_node
+from mantis_rig.simulated.sim_camera import FilmError
 
 FRAMES_TIMEOUT_S = 60.0
 FILM_DIR = 'film_dir'

@@ -1,6 +1,6 @@
 """What the three device nodes share: lifecycle, checked parameters, diagnostics and faults.
 
-configure builds the device for parameter `backend` (mantis_rig.hardware.backends) and opens it;
+configure builds the device for parameter `backend` (mantis_rig.backends) and opens it;
 activate starts streaming; deactivate stops; cleanup and shutdown release the device. Any
 failure to configure is a FAILURE return, its reason logged and on /diagnostics.
 
@@ -16,7 +16,7 @@ at configure while the device is configured, each with the reason.
 
 Services that block (homing, tare) and the simulated backends (which wait for the simulated
 world) need a MultiThreadedExecutor: `executors.run_node` spins one. The simulated backends
-exist only inside the simulated rig (mantis_rig.nodes.sim_rig), which gives each device node the
+exist only inside the simulated rig (mantis_rig.simulated.sim_rig), which gives each device node the
 world and its clock.
 """
 from __future__ import annotations
@@ -42,11 +42,10 @@ from rclpy.parameter import Parameter
 
 from mantis_rig import contract
 from mantis_rig.contract import DEVICE_COMMON_PARAMETERS, ParamSpec, check_backend
-from mantis_rig.errors import ConfigurationError
-from mantis_rig.hardware.interfaces import DeviceError
+from mantis_rig.faults import ConfigurationError
+from mantis_rig.hardware.device_interfaces import DeviceError
+from mantis_rig.runtime.lean_node import WithoutDefaultEventHandlers
 from mantis_sim.errors import InputError
-
-from .lean_node import WithoutDefaultEventHandlers
 
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 SUCCESS = TransitionCallbackReturn.SUCCESS
@@ -90,7 +89,7 @@ class DeviceNode(WithoutDefaultEventHandlers, LifecycleNode):
     def __init__(self, node_name: str, *, world_port=None, sim_clock=None, **kwargs):
         """world_port: the WorldPort of the sim backend (a LocalWorldPort), without which the
         sim backend cannot be configured; sim_clock: the SharedSimClock that sets this node's
-        time. Both come from the simulated rig (mantis_rig.nodes.sim_rig)."""
+        time. Both come from the simulated rig (mantis_rig.simulated.sim_rig)."""
         super().__init__(node_name, **kwargs)
         if sim_clock is not None:
             sim_clock.attach(self)

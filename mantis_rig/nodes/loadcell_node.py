@@ -19,13 +19,12 @@ import numpy as np
 from std_msgs.msg import Float64, Float64MultiArray
 from std_srvs.srv import Trigger
 
-from mantis_rig import contract
+from mantis_rig import backends, contract
 from mantis_rig.contract import FORCE_CEILING_NAME
-from mantis_rig.hardware import backends
-from mantis_rig.hardware.interfaces import DaqConfig, DeviceError
+from mantis_rig.hardware.device_interfaces import DaqConfig, DeviceError
 from mantis_rig.nodes.device_node import ERROR, WARN, DeviceNode, time_msg
-from mantis_rig.nodes.executors import run_node
 from mantis_rig.recording.force_block import force_block_to_msg
+from mantis_rig.runtime.executors import run_node
 
 
 class LoadcellNode(DeviceNode):

@@ -4,7 +4,7 @@ A consumer whose reactions must come in time on the rig's clock (the supervisor'
 the stage's force guard) publishes ``progress`` (contract.PROGRESS, std_msgs/Header): frame_id
 names it, stamp is the rig time up to which it has heard the force stream and acted on it; a
 stamp of 0 says it waits for nothing now. On a busy machine the simulated world then slows
-down instead of running ahead of a starved consumer (mantis_rig.nodes.sim_world_node); on
+down instead of running ahead of a starved consumer (mantis_rig.simulated.sim_world_node); on
 hardware nothing listens, and the messages cost a publish each.
 """
 from __future__ import annotations

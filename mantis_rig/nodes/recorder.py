@@ -16,7 +16,7 @@ import threading
 
 from mantis_rig import contract
 from mantis_rig.recording import BagClosedError, BagWriteError
-from mantis_rig.recording.interfaces import message_class
+from mantis_rig.recording.message_types import message_class
 
 #: Every topic of the contract that a trial's bag holds (mantis_rig.contract).
 TRIAL_TOPICS = contract.TRIAL_TOPICS

@@ -17,10 +17,9 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from mantis_rig.contract import REPLAY_NODE_EXECUTABLE
-from mantis_rig.nodes.ros_env import claim_local_domain
 from mantis_rig.replay import BagPlayer, ReplayError
-
-from .lean_node import WithoutDefaultEventHandlers
+from mantis_rig.runtime.lean_node import WithoutDefaultEventHandlers
+from mantis_rig.runtime.ros_env import claim_local_domain
 
 
 class ReplayNode(WithoutDefaultEventHandlers, Node):

@@ -53,20 +53,15 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, Header
 from std_srvs.srv import Trigger
 
-from mantis_rig import contract
+from mantis_rig import backends, contract
 from mantis_rig.contract import FORCE_CEILING_NAME, TRAVEL_NAME, side_node_name
-from mantis_rig.hardware import backends
-from mantis_rig.hardware.interfaces import (
-    ConfigurationError,
-    DeviceError,
-    SafetyLimitError,
-)
-from mantis_rig.nodes.clock_ticker import ClockTicker
+from mantis_rig.hardware.device_interfaces import ConfigurationError, DeviceError, SafetyLimitError
 from mantis_rig.nodes.device_node import ERROR, OK, WARN, DeviceNode
-from mantis_rig.nodes.executors import SideNode, run_node
-from mantis_rig.nodes.lean_node import LeanNode
 from mantis_rig.nodes.progress import ProgressReporter
 from mantis_rig.recording.force_block import force_block_from_msg
+from mantis_rig.runtime.clock_ticker import ClockTicker
+from mantis_rig.runtime.executors import SideNode, run_node
+from mantis_rig.runtime.lean_node import LeanNode
 
 HOME_TIMEOUT_S = 120.0
 MOVE_TIMEOUT_S = 120.0

@@ -7,7 +7,7 @@ runs any number of trials, each from where the first one started
 its log is closed (the bag holds that state too): whoever hears it can start the next trial and
 is never refused.
 A second abort while an aborted trial returns the stage stops it where it is. The trial
-conditions and procedure settings are parameters (mantis_rig.trial.conditions); they are
+conditions and procedure settings are parameters (mantis_rig.trial.supervisor_settings); they are
 fixed while a trial runs. Each trial is logged to its own bag directory under ``out``; the
 start_trial response names it. With ``video`` true the simulated camera films the trial into
 ``<bag directory>/video/`` (contract.FILM_FOLDER), after the trial's marker frames. The
@@ -41,13 +41,18 @@ from mantis_rig.contract import DEVICE_NODES
 from mantis_rig.recording import TRIAL_CONDITIONS, BagClosedError, BagWriteError, BagWriter
 from mantis_rig.recording.force_block import force_block_from_msg
 from mantis_rig.recording.marker_block import marker_block_from_msg
-from mantis_rig.trial.conditions import PARAMETERS, ConditionError, TrialConditions, check_value
+from mantis_rig.runtime.executors import SideNode, light_executor, run_node
+from mantis_rig.runtime.lean_node import WithoutDefaultEventHandlers
+from mantis_rig.runtime.memory import release_freed_memory
 from mantis_rig.trial.log_space import free_space_problem
 from mantis_rig.trial.sequence import SessionState, TrialSequence
+from mantis_rig.trial.supervisor_settings import (
+    PARAMETERS,
+    ConditionError,
+    TrialConditions,
+    check_value,
+)
 
-from .executors import SideNode, light_executor, run_node
-from .lean_node import WithoutDefaultEventHandlers
-from .memory import release_freed_memory
 from .recorder import Recorder
 from .rig_client import RigClient
 

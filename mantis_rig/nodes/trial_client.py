@@ -26,10 +26,10 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from mantis_rig import contract
-from mantis_rig.errors import StackError
-from mantis_rig.trial.conditions import PARAMETERS
+from mantis_rig.faults import StackError
+from mantis_rig.runtime.lean_node import WithoutDefaultEventHandlers
+from mantis_rig.trial.supervisor_settings import PARAMETERS
 
-from .lean_node import WithoutDefaultEventHandlers
 from .supervisor_node import STATUS_NAME
 
 ANSWER_GRACE_S = 2.0    # how long an answer is awaited before the supervisor's publications count

@@ -9,8 +9,8 @@ tool can open the bag without a custom interface package:
   ``data[1]`` = sample period [s];
 * ``layout.dim[0]`` = ``{label: 'force_n', size: n, stride: n}``: ``data[2:]`` are n forces [N].
 
-In Python a block is a :class:`~mantis_rig.hardware.interfaces.ForceBlock` (seconds, newtons),
-the rig's one type of force data, as the DAQ reads it.
+In Python a block is a :class:`~mantis_rig.hardware.device_interfaces.ForceBlock` (seconds,
+newtons), the rig's one type of force data, as the DAQ reads it.
 
 Why not the alternatives: ``sensor_msgs/ChannelFloat32`` and a bare Float64MultiArray carry no
 time at all; ``sensor_msgs/LaserScan`` has a stamp and ``time_increment`` but tools would draw the
@@ -21,7 +21,7 @@ long-term answer once the project has an interface package.
 import numpy as np
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from mantis_rig.hardware.interfaces import ForceBlock
+from mantis_rig.hardware.device_interfaces import ForceBlock
 
 __all__ = ['ForceBlock', 'force_block_from_msg', 'force_block_to_msg']
 

@@ -18,15 +18,15 @@ tracker's exports but in SI (REP 103). ``time_s`` is the frame time on the clock
 19,000-37,000 messages per second of video; a block keeps a tracked trial to a few hundred
 messages.
 
-In Python a block is a :class:`~mantis_rig.hardware.interfaces.MarkerFrames` (metres, seconds),
-the rig's one type of marker data: no unit changes between the camera and the bag.
+In Python a block is a :class:`~mantis_rig.hardware.device_interfaces.MarkerFrames` (metres,
+seconds), the rig's one type of marker data: no unit changes between the camera and the bag.
 """
 from __future__ import annotations
 
 import numpy as np
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from mantis_rig.hardware.interfaces import MarkerFrames
+from mantis_rig.hardware.device_interfaces import MarkerFrames
 
 __all__ = ['FRAMES_PER_BLOCK', 'MarkerFrames', 'concatenate', 'marker_block_from_msg',
            'marker_block_to_msg', 'marker_blocks_to_msgs']

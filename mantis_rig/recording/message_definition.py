@@ -11,7 +11,7 @@ same-package types qualified by the package ('geometry_msgs/Vector3').
 import functools
 import re
 
-from .interfaces import msg_file_text, split_type_name
+from mantis_rig.recording.message_types import msg_file_text, split_type_name
 
 SCHEMA_ENCODING = 'ros2msg'
 DELIMITER = '=' * 80 + '\n'

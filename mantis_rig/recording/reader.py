@@ -15,6 +15,7 @@ import warnings
 from mcap.reader import make_reader
 from rclpy.serialization import deserialize_message
 
+from mantis_rig.recording.message_types import message_class
 from mantis_sim.errors import InputError
 
 from .bag_metadata import (
@@ -23,7 +24,6 @@ from .bag_metadata import (
     MetadataFileError,
     read_metadata_yaml,
 )
-from .interfaces import message_class
 from .mcap_scan import NotMcapError, has_valid_tail, scan_mcap
 
 

@@ -10,8 +10,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 import sys
 
+from mantis_rig.recording.offered_qos import parse_offered_qos_string
+
 from .bag_metadata import ROSBAG2_RECORD_NAME
-from .qos import parse_offered_qos_string
 from .reader import BagReader
 from .writer import BagWriter
 

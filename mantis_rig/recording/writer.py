@@ -21,7 +21,14 @@ import time
 from mcap.writer import CompressionType, Writer
 from rclpy.serialization import serialize_message
 
-from ..errors import BagClosedError
+from mantis_rig.faults import BagClosedError
+from mantis_rig.recording.message_types import message_class, type_description_hash, type_name_of
+from mantis_rig.recording.offered_qos import (
+    default_offered_qos,
+    offered_qos_channel_string,
+    offered_qos_list,
+)
+
 from .bag_metadata import (
     ROSBAG2_RECORD_KEY,
     ROSBAG2_RECORD_NAME,
@@ -32,9 +39,7 @@ from .bag_metadata import (
     serialized_metadata,
     write_metadata_yaml,
 )
-from .interfaces import message_class, type_description_hash, type_name_of
 from .message_definition import SCHEMA_ENCODING, full_message_definition
-from .qos import default_offered_qos, offered_qos_channel_string, offered_qos_list
 
 PROFILE = 'ros2'
 LIBRARY = 'mantis_rig.recording (python mcap)'

@@ -19,13 +19,13 @@ from rclpy.duration import Duration
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rosgraph_msgs.msg import Clock
 
+from mantis_rig.recording.message_types import MessageTypeError, message_class
+from mantis_rig.recording.offered_qos import parse_offered_qos_string
+from mantis_rig.replay.replay_qos import replay_qos
 from mantis_sim.errors import InputError
 
 from ..contract import CLOCK, resolve
 from ..recording import BagError, BagReader
-from ..recording.interfaces import MessageTypeError, message_class
-from ..recording.qos import parse_offered_qos_string
-from .qos import replay_qos
 from .readahead import ReadAhead
 from .schedule import PlaybackClock, TimingStats, raise_priority, sleep_until
 

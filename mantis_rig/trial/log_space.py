@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 import shutil
 
-from .conditions import TrialConditions
+from mantis_rig.trial.supervisor_settings import TrialConditions
 
 FORCE_SAMPLE_RATE_HZ = 20_000.0      # the load cell's default rate (loadcell_node)
 BYTES_PER_FORCE_SAMPLE = 8           # float64, before compression

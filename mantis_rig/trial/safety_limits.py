@@ -20,7 +20,7 @@ its heartbeat (contract.HEARTBEAT, every HEARTBEAT_PERIOD_S) lapses for
 most 0.45 s after the last heartbeat).
 
 The stage's speed ceiling and soft travel limits are the driver's envelope
-(`mantis_rig.hardware.interfaces.StageLimits`); the supervisor's pull speed and travel are
+(`mantis_rig.hardware.device_interfaces.StageLimits`); the supervisor's pull speed and travel are
 checked against that same envelope.
 """
 from __future__ import annotations

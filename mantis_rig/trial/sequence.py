@@ -52,8 +52,8 @@ from mantis_rig.contract import (
     TARE,
     WORLD_CONDITIONS,
 )
+from mantis_rig.trial.supervisor_settings import TrialConditions
 
-from .conditions import TrialConditions
 from .force_monitor import ForceMonitor
 from .loading_work import LoadingWork
 from .safety_limits import PULL_BOUND_NODES, TRAVEL_NAME

@@ -141,7 +141,7 @@ def _grey(image: np.ndarray) -> np.ndarray:
 def _raw_layout(path: Path) -> dict | None:
     """The picture layout of an uncompressed grey .avi, None for any other (compressed,
     colour: OpenCV's); RecordingError for a file that is no AVI at all."""
-    from .errors import RecordingError
+    from mantis_rig.video.recording_error import RecordingError
     try:
         with open(path, 'rb') as f:
             head = f.read(12)

@@ -14,7 +14,8 @@ import math
 from pathlib import Path
 import re
 
-from .errors import RecordingError
+from mantis_rig.video.recording_error import RecordingError
+
 from .recording_base import Frame, Recording
 from .stills import PICTURE_SUFFIXES, StillFrames, picture_files
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import RecordingError
+from mantis_rig.video.recording_error import RecordingError
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,8 @@ import re
 
 import numpy as np
 
-from .errors import RecordingError
+from mantis_rig.video.recording_error import RecordingError
+
 from .recording_base import Frame, Recording
 
 PICTURE_SUFFIXES = ('.png', '.tif', '.tiff')

@@ -19,9 +19,9 @@ from typing import Optional, TextIO
 
 import numpy as np
 
+from mantis_rig.video.recording_error import RecordingError
 from mantis_sim.camera.calibration import Calibration, CalibrationError, load_calibration
 
-from .errors import RecordingError
 from .recording import open_recording
 from .stills import PICTURE_SUFFIXES
 from .track import Tracks, track, write_tracks

@@ -2,7 +2,7 @@
 ``python mantis_on_port.py PORT bringup --backend hardware ...`` (test/hardware_rig.py)."""
 import sys
 
-from mantis_rig.cli import trial as cli_trial
+from mantis_rig.cli import trial_commands as cli_trial
 from mantis_rig.cli.main import main as mantis_main
 
 

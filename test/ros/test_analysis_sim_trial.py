@@ -25,8 +25,8 @@ import rclpy
 
 from mantis_rig.cli import main
 from mantis_rig.contract import SIM_WORLD_NODE, STAGE_NODE
-from mantis_rig.nodes.bringup import Stack, StackConfig
 from mantis_rig.nodes.trial_client import TrialClient
+from mantis_rig.stack.bringup import Stack, StackConfig
 from mantis_sim.results import simulate
 from mantis_sim.scene import load_scene
 from mantis_sim.world import CAMERA_ORIGIN_MM

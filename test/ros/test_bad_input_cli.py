@@ -154,41 +154,41 @@ def test_a_bag_whose_marker_block_has_the_wrong_length(capsys, tmp_path, strike_
 def test_bad_input_and_rig_faults_have_roots_of_their_own():
     """InputError is not a ValueError (an `except ValueError` around a library call must not
     swallow a refusal); the device and stack faults stand under RigFault, not under it."""
-    from mantis_rig import errors
+    from mantis_rig import faults
     from mantis_rig.analysis.inputs import TrackFormatError
-    from mantis_rig.hardware.interfaces import DeviceError
-    from mantis_rig.hardware.world_port import WorldTimeout
-    from mantis_rig.nodes.bringup import StackError
+    from mantis_rig.hardware.device_interfaces import DeviceError
     from mantis_rig.recording import BagClosedError, BagError, BagWriteError
+    from mantis_rig.simulated.world_port import WorldTimeout
+    from mantis_rig.stack.bringup import StackError
     from mantis_sim.errors import InputError
     from mantis_sim.scene import SceneError
 
-    assert not hasattr(errors, 'InputError')       # one way in: mantis_sim.errors
+    assert not hasattr(faults, 'InputError')       # one way in: mantis_sim.errors
     assert not issubclass(InputError, ValueError)
     for refusal in (TrackFormatError, BagError, SceneError):
-        assert issubclass(refusal, InputError) and not issubclass(refusal, errors.RigFault)
-    for fault in (DeviceError, errors.SafetyLimitError, errors.ConfigurationError, WorldTimeout,
+        assert issubclass(refusal, InputError) and not issubclass(refusal, faults.RigFault)
+    for fault in (DeviceError, faults.SafetyLimitError, faults.ConfigurationError, WorldTimeout,
                   StackError, BagClosedError, BagWriteError):
-        assert issubclass(fault, errors.RigFault) and not issubclass(fault, (InputError,
+        assert issubclass(fault, faults.RigFault) and not issubclass(fault, (InputError,
                                                                              ValueError))
-    assert DeviceError is errors.DeviceError and StackError is errors.StackError
+    assert DeviceError is faults.DeviceError and StackError is faults.StackError
 
 
 @pytest.mark.parametrize('raised, status', [
     ('InputError', 2), ('DeviceError', 3), ('StackError', 3), ('BagClosedError', 3)])
 def test_mantis_says_each_error_in_one_line_with_its_exit_status(monkeypatch, capsys, raised,
                                                                  status):
-    from mantis_rig import errors
+    from mantis_rig import faults
     from mantis_rig.cli import sim
     from mantis_sim.errors import InputError
 
     def run_sim(args):
-        raise (InputError if raised == 'InputError' else getattr(errors, raised))(
+        raise (InputError if raised == 'InputError' else getattr(faults, raised))(
             'the reason, named')
 
     monkeypatch.setattr(sim, 'run_sim', run_sim)
     assert cli_main(['sim', '--scene', 'air_23mm']) == status == (
-        errors.USAGE_ERROR if raised == 'InputError' else errors.RIG_FAULT)
+        faults.USAGE_ERROR if raised == 'InputError' else faults.RIG_FAULT)
     captured = capsys.readouterr()
     assert captured.out == '' and captured.err == 'mantis sim: the reason, named\n'
 
@@ -196,4 +196,4 @@ def test_mantis_says_each_error_in_one_line_with_its_exit_status(monkeypatch, ca
 def test_the_usage_exit_status_is_defined_once():
     root = Path(__file__).resolve().parents[2] / 'mantis_rig'
     defined = [p for p in root.rglob('*.py') if 'USAGE_ERROR = ' in p.read_text()]
-    assert defined == [root / 'errors.py'], defined
+    assert defined == [root / 'faults.py'], defined

@@ -48,15 +48,15 @@ from mantis_rig.contract import (
     WRENCH,
     resolve,
 )
-from mantis_rig.hardware.interfaces import DeviceError
-from mantis_rig.hardware.world_port import WorldPort
+from mantis_rig.hardware.device_interfaces import DeviceError
 from mantis_rig.nodes.camera_node import CameraNode
-from mantis_rig.nodes.executors import Spinner, light_executor
 from mantis_rig.nodes.loadcell_node import LoadcellNode
-from mantis_rig.nodes.sim_rig import SimRig
 from mantis_rig.nodes.stage_node import StageNode
 from mantis_rig.recording.force_block import force_block_from_msg, force_block_to_msg
 from mantis_rig.recording.marker_block import concatenate, marker_block_from_msg
+from mantis_rig.runtime.executors import Spinner, light_executor
+from mantis_rig.simulated.sim_rig import SimRig
+from mantis_rig.simulated.world_port import WorldPort
 
 PULL_M_PER_S = 2.33e-3
 RATE_HZ = 20_000.0

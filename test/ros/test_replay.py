@@ -20,8 +20,8 @@ from rosgraph_msgs.msg import Clock
 
 from mantis_rig.contract import CLOCK, JOINT_STATE, MARKERS, SUPERVISOR_STATE, resolve
 from mantis_rig.recording import BagReader, BagWriter
-from mantis_rig.recording.interfaces import message_class
-from mantis_rig.recording.qos import parse_offered_qos_string
+from mantis_rig.recording.message_types import message_class
+from mantis_rig.recording.offered_qos import parse_offered_qos_string
 from mantis_rig.replay import BagPlayer, PlaybackClock, ReplayError, replay_qos
 from mantis_rig.replay.schedule import REALTIME_PRIORITY, TimingStats, sleep_until
 from mantis_rig.replay.synthetic import write_synthetic_trial

@@ -16,9 +16,9 @@ from mantis_rig.contract import (
     TRAVEL_NAME,
     resolve,
 )
-from mantis_rig.trial.conditions import ConditionError, TrialConditions, check_value
 from mantis_rig.trial.force_monitor import ForceMonitor
 from mantis_rig.trial.sequence import DEVICE_NODES, Pending, TrialSequence
+from mantis_rig.trial.supervisor_settings import ConditionError, TrialConditions, check_value
 
 RATE = 20_000.0
 
@@ -598,7 +598,7 @@ def test_a_trial_needs_room_on_disk_for_its_bag(tmp_path):
 def test_successive_ros_domain_claims_move_on():
     """A test never gets the domain the previous one just left (its processes' participants
     may still linger there in discovery)."""
-    from mantis_rig.nodes.ros_env import claim_free_domain, release_domain
+    from mantis_rig.runtime.ros_env import claim_free_domain, release_domain
     first = claim_free_domain()
     release_domain(first)
     second = claim_free_domain()
@@ -612,9 +612,9 @@ def test_a_domain_another_process_just_left_is_not_claimed_next():
     import subprocess
     import sys
 
-    from mantis_rig.nodes.ros_env import claim_free_domain, release_domain
+    from mantis_rig.runtime.ros_env import claim_free_domain, release_domain
     left = subprocess.run(
-        [sys.executable, '-c', 'from mantis_rig.nodes.ros_env import claim_free_domain, '
+        [sys.executable, '-c', 'from mantis_rig.runtime.ros_env import claim_free_domain, '
          'release_domain; d = claim_free_domain(); release_domain(d); print(d)'],
         capture_output=True, text=True, check=True)
     mine = claim_free_domain()

@@ -12,8 +12,8 @@ from std_msgs.msg import Header
 
 from mantis_rig.contract import FORCE_BLOCK, PROGRESS
 from mantis_rig.nodes.device_node import time_msg
-from mantis_rig.nodes.sim_world_node import STREAM_ALIVE_S, SimWorldNode
 from mantis_rig.recording.force_block import force_block_to_msg
+from mantis_rig.simulated.sim_world_node import STREAM_ALIVE_S, SimWorldNode
 
 LEAD_S = 0.05
 STEP_S = 0.01

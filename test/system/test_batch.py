@@ -15,8 +15,7 @@ from conftest import data_file
 import numpy as np
 import pytest
 
-from mantis_rig.analysis import batch
-from mantis_rig.analysis import trial as one_trial
+from mantis_rig.analysis import batch, one_trial
 from mantis_rig.analysis.inputs import tracker_export
 from mantis_rig.cli import main
 from mantis_rig.cli import options as cli_options

@@ -15,9 +15,9 @@ import pytest
 from test_session import FAST_RETURN, SCENE
 
 from mantis_rig.cli.main import main
-from mantis_rig.nodes.bringup import Stack, StackConfig
 from mantis_rig.nodes.trial_client import TrialClient
 from mantis_rig.recording import BagReader
+from mantis_rig.stack.bringup import Stack, StackConfig
 
 TRIAL_TIMEOUT_S = 240.0
 

@@ -157,7 +157,7 @@ def test_a_day_s_offset_is_taken_at_the_strike_s_own_angle_not_the_scene_s():
 def test_a_day_its_mean_angle_cannot_take_is_not_written_and_says_why(tmp_path):
     from pathlib import Path
 
-    from mantis_rig.cli import day_state as cli
+    from mantis_rig.cli import day_state_command as cli
     from mantis_sim.scene import available_scenes
     scene = load_scene('water_23mm')
     strikes = [RealStrike(f'{day}_{k}', 'water', 23.0, 3.0, 2.3, day)

@@ -17,11 +17,11 @@ import serial
 import serial.tools.list_ports
 from serial.tools.list_ports_common import ListPortInfo
 
+from mantis_rig.backends import make_stage
 from mantis_rig.cli import doctor
 from mantis_rig.cli.doctor_params import RigParams, load_params
 from mantis_rig.cli.main import main
 from mantis_rig.hardware import discovery
-from mantis_rig.hardware.backends import make_stage
 from mantis_rig.hardware.discovery import DiscoveryError, choose_kdc101
 
 pytestmark = pytest.mark.timeout(60)

@@ -19,7 +19,7 @@ from polling import wait_until
 import pytest
 
 from mantis_rig.hardware.kdc101 import Kdc101Stage
-from mantis_rig.nodes.watchdog import stop_stage_at_port
+from mantis_rig.stack.watchdog import stop_stage_at_port
 
 pytestmark = [pytest.mark.slow, pytest.mark.ros, pytest.mark.timeout(600)]
 

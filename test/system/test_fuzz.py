@@ -29,7 +29,7 @@ import yaml
 
 from mantis_rig.analysis.inputs import TrackFormatError, read_trial
 from mantis_rig.analysis.inputs.bag import read_trial_bag
-from mantis_rig.analysis.trial import analyse_trial
+from mantis_rig.analysis.one_trial import analyse_trial
 from mantis_rig.recording import BagError, BagReader, BagWriter, TruncatedBagWarning
 from mantis_rig.replay.synthetic import TOPICS, synthetic_messages
 from mantis_sim.errors import InputError

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import yaml
 
-from mantis_rig.video.errors import RecordingError
+from mantis_rig.video.recording_error import RecordingError
 from mantis_rig.video.to_csv import track_to_csv
 from mantis_sim.camera.calibration import CalibrationError, load_calibration
 from mantis_sim.camera.render import CameraSetup, film_strike

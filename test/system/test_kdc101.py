@@ -23,7 +23,7 @@ from mantis_rig.hardware.apt_units import (
     Z8_DATASHEET_COUNTS_PER_MM,
     AptScale,
 )
-from mantis_rig.hardware.interfaces import (
+from mantis_rig.hardware.device_interfaces import (
     ConfigurationError,
     DeviceError,
     ForceBlock,
@@ -832,7 +832,7 @@ def test_bad_guard_settings_are_refused(kwargs, pattern):
 
 
 def test_backends_wrap_the_hardware_stage_in_a_guard():
-    from mantis_rig.hardware import backends
+    from mantis_rig import backends
     guarded = backends.make_stage('hardware', serial_port='/dev/null', force_ceiling_n=15.0)
     assert isinstance(guarded, StageGuard) and isinstance(guarded.stage, Kdc101Stage)
     assert guarded.force_ceiling_n == 15.0 and guarded.max_force_age_s == 0.5

@@ -18,11 +18,11 @@ from test_trial import FAST_RETURN, SCENE, TRIAL_TIMEOUT_S, bag_of, wait_closed
 
 from mantis_rig import contract
 from mantis_rig.analysis.inputs.bag import read_trial_bag
-from mantis_rig.nodes.bringup import Stack, StackConfig
 from mantis_rig.nodes.supervisor_node import STATUS_NAME
 from mantis_rig.nodes.trial_client import TrialClient
 from mantis_rig.recording import BagReader
 from mantis_rig.recording.trial_summary import summarize
+from mantis_rig.stack.bringup import Stack, StackConfig
 
 pytestmark = [pytest.mark.timeout(600), pytest.mark.slow, pytest.mark.ros]
 

@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from mantis_rig.hardware.interfaces import DaqConfig, DeviceError
+from mantis_rig.hardware.device_interfaces import DaqConfig, DeviceError
 from mantis_rig.hardware.nidaq_force import NidaqForceDaq
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))

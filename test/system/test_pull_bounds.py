@@ -40,11 +40,11 @@ from mantis_rig.contract import (
     VELOCITY_COMMAND,
     resolve,
 )
-from mantis_rig.nodes.bringup import Stack, StackConfig
-from mantis_rig.nodes.executors import Spinner, light_executor
 from mantis_rig.nodes.trial_client import TrialClient
 from mantis_rig.recording import BagReader
 from mantis_rig.recording.force_block import force_block_to_msg
+from mantis_rig.runtime.executors import Spinner, light_executor
+from mantis_rig.stack.bringup import Stack, StackConfig
 
 REPO = Path(__file__).resolve().parents[2]
 SCENE = 'air_23mm_rig'

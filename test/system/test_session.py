@@ -29,9 +29,9 @@ from mantis_rig.contract import (
     node_interface,
     resolve,
 )
-from mantis_rig.nodes.bringup import Stack, StackConfig
 from mantis_rig.nodes.trial_client import TrialClient
 from mantis_rig.recording.trial_summary import summarize
+from mantis_rig.stack.bringup import Stack, StackConfig
 
 SCENE = 'air_23mm_rig'
 TRIAL_TIMEOUT_S = 240.0

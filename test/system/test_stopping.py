@@ -30,11 +30,11 @@ from mantis_rig.contract import (
     VELOCITY_COMMAND,
     resolve,
 )
-from mantis_rig.errors import RIG_FAULT
-from mantis_rig.nodes.bringup import Stack, StackConfig
+from mantis_rig.faults import RIG_FAULT
 from mantis_rig.nodes.trial_client import TrialClient
 from mantis_rig.recording import BagReader, TruncatedBagWarning
 from mantis_rig.recording import writer as writer_module
+from mantis_rig.stack.bringup import Stack, StackConfig
 
 REPO = Path(__file__).resolve().parents[2]
 EXIT_BOUND_S = 8.0
@@ -206,7 +206,7 @@ def test_a_node_process_killed_by_its_own_signal_aborts_the_trial(trial):
     run.wait_into_trial()
     children = run.children()
     rig = next(pid for pid in children
-               if 'mantis_rig.nodes.sim_rig' in Path(f'/proc/{pid}/cmdline').read_text())
+               if 'mantis_rig.simulated.sim_rig' in Path(f'/proc/{pid}/cmdline').read_text())
     os.kill(rig, signal.SIGTERM)
     status = run.wait(timeout_s=60.0)
     stderr = '\n'.join(run.stderr)
@@ -294,7 +294,7 @@ def test_a_deferred_first_signal_is_raised_where_the_spin_loop_asks_for_it():
     """Node processes defer the first signal (run_node): raised from the handler it could land
     inside rclpy's C++ message conversion, which turned it into a RuntimeError (the supervisor
     closed its trial as 'supervisor shutting down', with a traceback)."""
-    from mantis_rig.nodes.stopping import StopRequested, StopSignals
+    from mantis_rig.runtime.stopping import StopRequested, StopSignals
     saved = {signum: signal.getsignal(signum) for signum in (signal.SIGINT, signal.SIGTERM)}
     try:
         signals = StopSignals('test').install(deferred=True)

@@ -17,7 +17,7 @@ import pytest
 
 from mantis_rig.contract import DIAGNOSTICS, resolve
 from mantis_rig.recording import TRIAL_OUTCOME, BagReader
-from mantis_rig.study.record import read_record
+from mantis_rig.study_session.record import read_record
 from mantis_sim.results import simulate
 from mantis_sim.scene import load_scene
 from mantis_sim.studies.rig_study.quantities import QUANTITIES

@@ -12,12 +12,12 @@ import rclpy
 from std_srvs.srv import Trigger
 
 from mantis_rig.contract import STAGE_NODE, STUDY_CONTINUE, resolve
-from mantis_rig.nodes.bringup import Stack, StackConfig
 from mantis_rig.nodes.trial_client import TrialClient
-from mantis_rig.study.analyst import Analyst
-from mantis_rig.study.rig import ClientRig, PersonOperator
-from mantis_rig.study.runner import StudyRunner, StudySetup
-from mantis_rig.study.session import _continue_node
+from mantis_rig.stack.bringup import Stack, StackConfig
+from mantis_rig.study_session.analyst import Analyst
+from mantis_rig.study_session.rig import ClientRig, PersonOperator
+from mantis_rig.study_session.runner import StudyRunner, StudySetup
+from mantis_rig.study_session.session import _continue_node
 from mantis_sim.studies.rig_study.plan import plan_from_mapping
 
 RATE_HZ = 20_000.0

@@ -10,8 +10,8 @@ from test_study import Command, left_running
 
 from mantis_rig.contract import FILM_FOLDER
 from mantis_rig.recording import TRIAL_OUTCOME, BagReader
-from mantis_rig.study.measure import marker_quantities
-from mantis_rig.study.record import read_record
+from mantis_rig.study_session.measure import marker_quantities
+from mantis_rig.study_session.record import read_record
 from mantis_rig.video.recording import open_recording
 
 PLAN = """scene: air_23mm_rig

@@ -14,8 +14,8 @@ import pytest
 
 from mantis_rig.cli import main as cli_main
 from mantis_sim.studies.design.designs import grid, parse_range
-from mantis_sim.studies.design.plots import pareto_front
 from mantis_sim.studies.design.sweep import read_table, run_sweep
+from mantis_sim.studies.design.sweep_plots import pareto_front
 
 SCENE = 'reference_air_23mm'
 FIXED = ['integration.solver=LSODA', 'integration.rtol=0.001']

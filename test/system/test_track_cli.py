@@ -91,7 +91,7 @@ def test_study_attach_tracks_a_video_and_fills_its_trial(film, tmp_path, capsys)
 
     from study_records import two_trials_done
 
-    from mantis_rig.study.record import read_record
+    from mantis_rig.study_session.record import read_record
     directory = two_trials_done(tmp_path)
     video = tmp_path / 'videos' / 'guide_run002_trial002.avi'
     video.parent.mkdir()

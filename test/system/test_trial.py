@@ -43,12 +43,12 @@ from mantis_rig.contract import (
     node_interface,
     resolve,
 )
-from mantis_rig.nodes.bringup import Stack, StackConfig
 from mantis_rig.nodes.recorder import TRIAL_TOPICS
 from mantis_rig.nodes.trial_client import TrialClient
 from mantis_rig.recording import BagReader, TruncatedBagWarning, recover_bag
 from mantis_rig.recording.marker_block import concatenate, marker_block_from_msg
 from mantis_rig.recording.trial_summary import summarize
+from mantis_rig.stack.bringup import Stack, StackConfig
 
 REPO = Path(__file__).resolve().parents[2]
 SCENE = 'reference_air_23mm'

@@ -31,13 +31,13 @@ from mantis_rig.contract import (
     node_interface,
     resolve,
 )
-from mantis_rig.nodes.bringup import Stack, StackConfig
 from mantis_rig.nodes.trial_client import TrialClient
 from mantis_rig.recording import BagReader
 from mantis_rig.recording.trial_summary import summarize
-from mantis_sim.conditions import scene_for_conditions
+from mantis_rig.stack.bringup import Stack, StackConfig
 from mantis_sim.results import simulate
 from mantis_sim.scene import load_scene
+from mantis_sim.trial_conditions import scene_for_conditions
 
 SCENE = 'air_23mm_rig'
 TRIAL_TIMEOUT_S = 240.0

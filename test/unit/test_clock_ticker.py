@@ -5,7 +5,7 @@ import time
 from rclpy.clock import ROSClock
 from rclpy.time import Time
 
-from mantis_rig.nodes.clock_ticker import ClockTicker
+from mantis_rig.runtime.clock_ticker import ClockTicker
 
 
 def simulated_clock(t_s: float = 0.0) -> ROSClock:

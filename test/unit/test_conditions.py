@@ -1,15 +1,15 @@
-"""mantis_sim.conditions: a rig trial's conditions and the scene that simulates them, one way
+"""mantis_sim.trial_conditions: a rig trial's conditions and the scene that simulates them, one way
 and back; the refusals name the condition and why. And the session's robots drawn about the
 scene at a trial's conditions (mantis_sim.robots)."""
 import pytest
 
 from mantis_rig.contract import SUPERVISOR_PARAMETERS, WORLD_CONDITIONS
-from mantis_rig.trial.conditions import TrialConditions
-from mantis_sim.conditions import CONDITION_KEYS, conditions_of_scene, scene_for_conditions
+from mantis_rig.trial.supervisor_settings import TrialConditions
 from mantis_sim.errors import InputError
 from mantis_sim.parameters import MEDIUM_DENSITIES_G_PER_MM3, Medium, ParameterError
 from mantis_sim.robots import SessionRobots
 from mantis_sim.scene import load_scene
+from mantis_sim.trial_conditions import CONDITION_KEYS, conditions_of_scene, scene_for_conditions
 
 RIG = 'air_23mm_rig'
 

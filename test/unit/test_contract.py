@@ -12,12 +12,12 @@ from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 from mantis_rig import contract
 from mantis_rig.analysis.inputs.bag import read_trial_bag
 from mantis_rig.hardware.apt_units import Z8_COUNTS_PER_MM
-from mantis_rig.hardware.interfaces import StageLimits
-from mantis_rig.nodes.node_table import DEVICES, NODES
+from mantis_rig.hardware.device_interfaces import StageLimits
 from mantis_rig.recording import BagReader
 from mantis_rig.recording.trial_summary import summarize
-from mantis_rig.replay.qos import replay_qos
+from mantis_rig.replay.replay_qos import replay_qos
 from mantis_rig.replay.synthetic import write_synthetic_trial
+from mantis_rig.stack.node_table import DEVICES, NODES
 
 REPO = Path(__file__).resolve().parents[2]
 PACKAGE = REPO / 'mantis_rig'
@@ -47,10 +47,10 @@ def contract_names() -> set:
 #: string pieces that look like ROS names and are not: (file, text) -> what they are
 NOT_ROS_NAMES = {
     ('mantis_rig/hardware/nidaq.py', '/line'): 'part of a DAQ line name, Dev1/port0/line0',
-    ('mantis_rig/recording/interfaces.py', '/msg/'): 'part of a message type, pkg/msg/Type',
+    ('mantis_rig/recording/message_types.py', '/msg/'): 'part of a message type, pkg/msg/Type',
     ('mantis_rig/analysis/intervals.py', 'm/s'): 'a unit, metres per second',
-    ('mantis_rig/nodes/stopping.py', '/proc/'): 'a path, /proc/<pid>/stat',
-    ('mantis_rig/nodes/stopping.py', '/stat'): 'a path, /proc/<pid>/stat',
+    ('mantis_rig/runtime/stopping.py', '/proc/'): 'a path, /proc/<pid>/stat',
+    ('mantis_rig/runtime/stopping.py', '/stat'): 'a path, /proc/<pid>/stat',
 }
 
 
@@ -195,9 +195,10 @@ def test_the_parameters_agree_with_the_drivers():
 
 
 def test_the_nodes_declare_the_contracts_parameters():
-    from mantis_rig.nodes import camera_node, loadcell_node, sim_world_node, stage_node
+    from mantis_rig.nodes import camera_node, loadcell_node, stage_node
     from mantis_rig.nodes.device_node import COMMON_PARAMETERS
-    from mantis_rig.trial.conditions import PARAMETERS
+    from mantis_rig.simulated import sim_world_node
+    from mantis_rig.trial.supervisor_settings import PARAMETERS
     assert COMMON_PARAMETERS == contract.DEVICE_COMMON_PARAMETERS
     assert stage_node.StageNode.PARAMETERS == contract.STAGE_PARAMETERS
     assert loadcell_node.LoadcellNode.PARAMETERS == contract.LOADCELL_PARAMETERS
@@ -245,7 +246,7 @@ def test_the_synthetic_bag_offers_the_contracts_qos(tmp_path):
     """No best-effort publisher, not even in a synthetic bag; the latched state stays latched
     when replayed from whatever namespace."""
     write_synthetic_trial(tmp_path / 'rig2', namespace='/rig2')
-    from mantis_rig.recording.qos import parse_offered_qos_string
+    from mantis_rig.recording.offered_qos import parse_offered_qos_string
     reader = BagReader(tmp_path / 'rig2')
     for name, info in reader.topics.items():
         offered = parse_offered_qos_string(info.metadata.get('offered_qos_profiles', ''))

@@ -12,12 +12,12 @@ from pathlib import Path
 import pytest
 
 from mantis_rig.cli import build_parser
-from mantis_rig.cli.trial import stack_config
+from mantis_rig.cli.trial_commands import stack_config
 from mantis_rig.contract import STAGE_NODE
-from mantis_rig.nodes import sim_world_node
 from mantis_rig.nodes.device_node import COMMON_PARAMETERS
-from mantis_rig.nodes.node_table import BY_NAME, DEVICES, SIM_RIG_PROCESS, SUPERVISOR, WORLD
-from mantis_rig.trial.conditions import PARAMETERS as SUPERVISOR_PARAMETERS
+from mantis_rig.simulated import sim_world_node
+from mantis_rig.stack.node_table import BY_NAME, DEVICES, SIM_RIG_PROCESS, SUPERVISOR, WORLD
+from mantis_rig.trial.supervisor_settings import PARAMETERS as SUPERVISOR_PARAMETERS
 
 REPO = Path(__file__).resolve().parents[2]
 LAUNCH_FILE = REPO / 'launch' / 'mantis_rig.launch.py'

@@ -181,14 +181,14 @@ def test_the_study_folders_say_what_they_serve():
 
 def test_input_error_has_one_home_and_one_way_in():
     """InputError is defined in mantis_sim.errors and imported from there, by name, in both
-    packages, bench/ and test/; mantis_rig.errors holds the rig's faults, not a second way
+    packages, bench/ and test/; mantis_rig.faults holds the rig's faults, not a second way
     in."""
     modules = _modules()
     defined = [m for m, p in modules.items()
                if 'class InputError' in p.read_text(encoding='utf-8')]
     assert defined == ['mantis_sim.errors']
-    import mantis_rig.errors
-    assert not hasattr(mantis_rig.errors, 'InputError')
+    import mantis_rig.faults
+    assert not hasattr(mantis_rig.faults, 'InputError')
     wrong = []
     files = [*modules.values(), *sorted((REPO / 'bench').rglob('*.py')),
              *sorted(TEST_DIR.rglob('*.py'))]

@@ -12,7 +12,7 @@ from fakes_nidaq import FakeDaqSystem
 import numpy as np
 import pytest
 
-from mantis_rig.hardware.interfaces import (
+from mantis_rig.hardware.device_interfaces import (
     CameraConfig,
     ConfigurationError,
     DaqConfig,

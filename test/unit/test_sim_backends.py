@@ -2,11 +2,11 @@
 import numpy as np
 import pytest
 
-from mantis_rig.hardware.interfaces import CameraConfig, ConfigurationError, DaqConfig
-from mantis_rig.hardware.local_world import LocalWorldPort, WorldRunner
-from mantis_rig.hardware.sim_camera import SimCameraTrigger
-from mantis_rig.hardware.sim_force import SimForceDaq
-from mantis_rig.hardware.sim_stage import SimStage
+from mantis_rig.hardware.device_interfaces import CameraConfig, ConfigurationError, DaqConfig
+from mantis_rig.simulated.local_world import LocalWorldPort, WorldRunner
+from mantis_rig.simulated.sim_camera import SimCameraTrigger
+from mantis_rig.simulated.sim_force import SimForceDaq
+from mantis_rig.simulated.sim_stage import SimStage
 from mantis_sim.results import simulate
 from mantis_sim.scene import load_scene
 from mantis_sim.sensors import LoadCellSensor

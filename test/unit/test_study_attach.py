@@ -8,8 +8,8 @@ import pytest
 from study_records import two_trials_done
 
 from mantis_rig.cli.main import main
-from mantis_rig.study.attach import attach_exports
-from mantis_rig.study.record import read_record
+from mantis_rig.study_session.attach import attach_exports
+from mantis_rig.study_session.record import read_record
 from mantis_sim.errors import InputError
 
 EXPORT = 'real_trials/air_23mm_19kfps_pair_track.csv'      # the authors: 22.96 m/s, 78.1 mJ

@@ -7,9 +7,9 @@ import pytest
 from mantis_sim.scene import load_scene
 from mantis_sim.studies.rig_study.effects import Effect, _with_more_repeats, twin_effects
 from mantis_sim.studies.rig_study.figures import effects_figure
-from mantis_sim.studies.rig_study.forecast import Ensemble, StudyForecaster, latent_layout
 from mantis_sim.studies.rig_study.plan import plan_from_mapping
 from mantis_sim.studies.rig_study.quantities import MeasurementError
+from mantis_sim.studies.rig_study.twin_forecast import Ensemble, StudyForecaster, latent_layout
 
 ROBOTS = 401
 LOWER, UPPER = -3.0, 12.0          # the latch offset's range at a contact angle of 3 degrees

@@ -7,16 +7,16 @@ import pytest
 
 from mantis_sim.scene import load_scene
 from mantis_sim.studies.rig_study.effects import measured_effects
-from mantis_sim.studies.rig_study.forecast import (
+from mantis_sim.studies.rig_study.judge import judge
+from mantis_sim.studies.rig_study.plan import plan_from_mapping
+from mantis_sim.studies.rig_study.quantities import RIG_ERROR
+from mantis_sim.studies.rig_study.twin_forecast import (
     DAY_QUANTITY,
     StudyForecaster,
     latent_layout,
     robot_quantities,
     simulate_ensemble,
 )
-from mantis_sim.studies.rig_study.judge import judge
-from mantis_sim.studies.rig_study.plan import plan_from_mapping
-from mantis_sim.studies.rig_study.quantities import RIG_ERROR
 
 CONDITIONS = {'d_t_mm': 23.0, 'pull_speed_mm_s': 2.3}
 

@@ -3,7 +3,7 @@ from collections import Counter
 
 import pytest
 
-from mantis_rig.trial.conditions import check_value
+from mantis_rig.trial.supervisor_settings import check_value
 from mantis_sim.studies.rig_study.plan import PlanError, load_plan, plan_from_mapping
 
 BINDING = """
@@ -113,7 +113,7 @@ def test_video_is_true_or_false_and_round_trips(tmp_path):
 
 
 def test_video_is_refused_on_hardware_before_a_trial_starts():
-    from mantis_rig.trial.conditions import ConditionError, TrialConditions
+    from mantis_rig.trial.supervisor_settings import ConditionError, TrialConditions
     assert TrialConditions(video=True).validate().video
     with pytest.raises(ConditionError, match='the hardware camera records the strike itself'):
         TrialConditions(video=True, backend='hardware').validate()

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from mantis_rig.recording import BagWriter
-from mantis_rig.study.record import read_record
-from mantis_rig.study.runner import StudyError, StudyRunner, StudySetup
+from mantis_rig.study_session.record import read_record
+from mantis_rig.study_session.runner import StudyError, StudyRunner, StudySetup
 from mantis_sim.scene import load_scene
-from mantis_sim.studies.rig_study.forecast import StudyForecaster, simulate_ensemble
 from mantis_sim.studies.rig_study.plan import plan_from_mapping
 from mantis_sim.studies.rig_study.quantities import QUANTITIES, SIMULATED_RIG_ERROR
+from mantis_sim.studies.rig_study.twin_forecast import StudyForecaster, simulate_ensemble
 
 PLAN = {'scene': 'air_23mm_rig', 'factors': {'d_t_mm': [19, 25], 'pull_speed_mm_s': [1.0, 2.3]},
         'repeats': 2, 'order': 'random', 'seed': 5, 'robots': 20}

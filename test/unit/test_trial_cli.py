@@ -1,15 +1,15 @@
 """`mantis trial` and `mantis bringup` without ROS: the options into a stack's configuration,
 and how a node process on its way out is told from a device fault once a trial of a
-multi-process stack has been aborted (mantis_rig.cli.trial._name_a_dying_process)."""
+multi-process stack has been aborted (mantis_rig.cli.trial_commands._name_a_dying_process)."""
 import time
 
 import pytest
 
-from mantis_rig.cli import trial as cli_trial
+from mantis_rig.cli import trial_commands as cli_trial
 from mantis_rig.cli.main import build_parser
-from mantis_rig.errors import StackError
-from mantis_rig.nodes.stopping import PROCESS_STOPPING
-from mantis_rig.trial.conditions import ConditionError
+from mantis_rig.faults import StackError
+from mantis_rig.runtime.stopping import PROCESS_STOPPING
+from mantis_rig.trial.supervisor_settings import ConditionError
 
 
 class SlowlyEndingStack:

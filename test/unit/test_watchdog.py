@@ -1,4 +1,4 @@
-"""Finding a node process that ended, froze or hung (mantis_rig.nodes.watchdog), the line that
+"""Finding a node process that ended, froze or hung (mantis_rig.stack.watchdog), the line that
 names it, and the reason handed to the node processes (issue 41). No process is started: the
 processes are stand-ins, their /proc state is given."""
 import signal
@@ -6,10 +6,11 @@ import signal
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import pytest
 
-from mantis_rig.errors import StackError
-from mantis_rig.nodes import stopping, watchdog
-from mantis_rig.nodes.bringup import StackConfig
-from mantis_rig.nodes.watchdog import LaunchWatch, ProcessWatch, describe_exit
+from mantis_rig.faults import StackError
+from mantis_rig.runtime import stopping
+from mantis_rig.stack import watchdog
+from mantis_rig.stack.bringup import StackConfig
+from mantis_rig.stack.watchdog import LaunchWatch, ProcessWatch, describe_exit
 
 
 class FakeProcess:
@@ -168,8 +169,8 @@ def test_a_launch_shutting_down_reports_nothing(tmp_path):
 
 
 def test_the_line_says_what_became_of_the_trials_bag(tmp_path):
-    from mantis_rig.cli.trial import fault_line
-    from mantis_rig.nodes.watchdog import ProcessFault
+    from mantis_rig.cli.trial_commands import fault_line
+    from mantis_rig.stack.watchdog import ProcessFault
     fault = ProcessFault('supervisor_node', 'was killed by SIGKILL', ended=True)
     bag = tmp_path / 'trial_20261128_070000'
     bag.mkdir()

@@ -4,12 +4,12 @@ import math
 import numpy as np
 import pytest
 
-from mantis_sim.conditions import scene_for_conditions
 from mantis_sim.drive import CommandedPull
 from mantis_sim.mechanism import Mechanism
 from mantis_sim.model import SimulationError
 from mantis_sim.results import simulate
 from mantis_sim.scene import load_scene
+from mantis_sim.trial_conditions import scene_for_conditions
 from mantis_sim.world import SETTLE_AFTER_PEAK_MS, RobotInUse, World
 
 STEP_S = 0.01

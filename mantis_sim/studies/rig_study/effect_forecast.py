@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-from .forecast import DAY_QUANTITY, Ensemble, StudyForecaster
+from mantis_sim.studies.rig_study.twin_forecast import DAY_QUANTITY, Ensemble, StudyForecaster
 
 #: Replays of the study per forecast: the 2.5 % and 97.5 % quantiles move by about 3 % of
 #: the interval's width from seed to seed at this many.

@@ -25,9 +25,9 @@ import math
 import numpy as np
 
 from mantis_sim.studies.design.spread_effects import strikes_needed
+from mantis_sim.studies.rig_study.twin_forecast import StudyForecaster
 
 from .effect_forecast import replay_values, replayed_effects
-from .forecast import StudyForecaster
 from .plan import CONDITION_KEYS, StudyPlan
 from .quantities import QUANTITIES
 

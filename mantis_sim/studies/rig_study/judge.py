@@ -8,8 +8,8 @@ from dataclasses import dataclass
 import math
 
 from mantis_sim.spread import QUANTILE_LEVELS, quantile_label
+from mantis_sim.studies.rig_study.twin_forecast import INTERVAL_95, Forecast
 
-from .forecast import INTERVAL_95, Forecast
 from .quantities import QUANTITIES
 
 QUANTILE_LABELS = tuple(quantile_label(q) for q in QUANTILE_LEVELS)

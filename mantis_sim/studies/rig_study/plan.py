@@ -39,7 +39,7 @@ import yaml
 
 from mantis_sim.errors import InputError
 
-#: The trial conditions a plan may vary or fix: the supervisor's (mantis_sim.conditions).
+#: The trial conditions a plan may vary or fix: the supervisor's (mantis_sim.trial_conditions).
 CONDITION_KEYS = ('pull_speed_mm_s', 'd_t_mm', 'contact_angle_deg', 'medium')
 ORDERS = ('random', 'as-listed', 'split-plot')
 PLAN_KEYS = ('scene', 'factors', 'repeats', 'order', 'seed', 'fixed', 'hard_to_change',
