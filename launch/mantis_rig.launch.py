@@ -78,13 +78,12 @@ def processes(backend):
 
 
 def scene_conditions(scene):
-    """The trial conditions a simulated scene states (as `mantis bringup` takes them)."""
+    """The trial conditions a simulated scene states, as `mantis bringup` takes them (the
+    contact angle as recorded; the world adds the latch offset to seat the arm)."""
     from mantis_sim.scene import load_scene
+    from mantis_sim.trial_conditions import conditions_of_scene
 
-    loaded = load_scene(scene)
-    return {'pull_speed_mm_s': loaded.drive.pull_speed_mm_per_s,
-            'medium': loaded.medium.name, 'd_t_mm': loaded.geometry.d_t_mm,
-            'contact_angle_deg': loaded.geometry.latched_angle_deg}     # where the arm rests
+    return conditions_of_scene(load_scene(scene))
 
 
 def node_parameters(backend, scene, seed, real_time_factor, out):

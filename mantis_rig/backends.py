@@ -25,13 +25,13 @@ from mantis_rig.hardware.device_interfaces import (
     DaqConfig,
     ForceDaq,
     Stage,
-    StageGuard,
     StageLimits,
 )
 from mantis_rig.simulated.sim_camera import SimCameraTrigger
 from mantis_rig.simulated.sim_force import SimForceDaq
 from mantis_rig.simulated.sim_stage import SimStage
 from mantis_rig.simulated.world_port import WorldPort
+from mantis_rig.trial.stage_guard import StageGuard
 from mantis_sim.scene import Scene, load_scene
 
 if TYPE_CHECKING:

@@ -1,4 +1,5 @@
-"""A rig trial's conditions and the scene that simulates them: the one mapping (no ROS).
+"""A rig trial's conditions, defined once: their keys, units and ranges, and the scene keys
+that state them (no ROS).
 
 The rig records four conditions with every trial (the supervisor's parameters, the bag's
 ``trial_conditions``); each is one scene key:
@@ -16,6 +17,12 @@ condition              scene
                        own density: the condition does not say it)
 =====================  =========================================================================
 
+``CONDITIONS`` says each one's unit, the rig's default and the range a trial may record (the
+supervisor's parameters, in the rig's contract), and the narrower range the simulated world can
+build its robot at (its parameters). Everything that names the conditions takes them from here:
+the rig's contract and its trial record, a study's plan, the launch file and `mantis bringup`
+(a scene's conditions: ``conditions_of_scene``).
+
 ``scene_for_conditions`` applies whichever of them are given and refuses, with ParameterError
 naming the condition and why, one the scene cannot take (vacuum for a scene whose effects need
 a fluid, a contact angle that puts the latched arm outside [0, 15] degrees, a value out of its
@@ -26,25 +33,55 @@ its conditions with it.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 import math
 
-from mantis_sim.parameters import MEDIUM_DENSITIES_G_PER_MM3, ParameterError
-from mantis_sim.scene import Scene
+from .parameters import MEDIUM_DENSITIES_G_PER_MM3, ParameterError
+from .scene import Scene
 
+
+@dataclass(frozen=True)
+class Condition:
+    """One trial condition: its key, unit ('' for none), what it is, the scene key that states
+    it, the rig's default, the range a trial may record (inclusive; ``high`` None: up to the
+    rig's own limit, the stage's speed ceiling) or its choices, and the range the simulated
+    world can build its robot at."""
+
+    key: str
+    unit: str
+    doc: str
+    scene_key: str
+    default: object
+    range: tuple | None = None
+    choices: tuple | None = None
+    simulated_range: tuple | None = None
+
+
+#: the media a robot can strike in
+MEDIA = tuple(MEDIUM_DENSITIES_G_PER_MM3)
 #: the conditions a rig trial records that the scene simulates, in the order of the table above
-CONDITION_KEYS = ('pull_speed_mm_s', 'd_t_mm', 'contact_angle_deg', 'medium')
+CONDITIONS = (
+    Condition('pull_speed_mm_s', 'mm/s', 'stage pull speed during the trial',
+              'drive.pull_speed_mm_per_s', 2.33, range=(0.05, None)),
+    Condition('d_t_mm', 'mm', 'tendon guide distance from the body pivot', 'geometry.d_t_mm',
+              23.0, range=(1.0, 100.0), simulated_range=(1.0, 100.0)),
+    Condition('contact_angle_deg', 'deg', 'contact angle, as recorded (the shim)',
+              'geometry.contact_angle_deg', 3.0, range=(-45.0, 45.0),
+              simulated_range=(0.0, 15.0)),
+    Condition('medium', '', 'medium around the robot', 'medium.name', 'air', choices=MEDIA),
+)
+CONDITION_BY_KEY = {c.key: c for c in CONDITIONS}
+CONDITION_KEYS = tuple(CONDITION_BY_KEY)
 #: condition -> the scene key it sets (medium also sets medium.density_g_per_mm3)
-SCENE_KEYS = {'pull_speed_mm_s': 'drive.pull_speed_mm_per_s', 'd_t_mm': 'geometry.d_t_mm',
-              'contact_angle_deg': 'geometry.contact_angle_deg', 'medium': 'medium.name'}
+SCENE_KEYS = {c.key: c.scene_key for c in CONDITIONS}
 _FLUID_EFFECTS = ('fluid_drag', 'added_mass', 'published_arm_air_load', 'published_added_mass')
 
 
 def conditions_of_scene(scene: Scene) -> dict:
-    """The trial conditions a scene simulates: {condition: value} for every CONDITION_KEYS."""
-    return {'pull_speed_mm_s': scene.drive.pull_speed_mm_per_s,
-            'd_t_mm': scene.geometry.d_t_mm,
-            'contact_angle_deg': scene.geometry.contact_angle_deg,
-            'medium': scene.medium.name}
+    """The trial conditions a scene simulates: {condition: value} for every CONDITION_KEYS
+    (the contact angle as recorded, not where the arm sits: that adds the latch offset)."""
+    return {key: getattr(getattr(scene, section), name) for key, (section, _, name) in
+            ((key, scene_key.partition('.')) for key, scene_key in SCENE_KEYS.items())}
 
 
 def scene_for_conditions(scene: Scene, conditions: Mapping) -> Scene:
@@ -93,4 +130,5 @@ def _medium(scene: Scene, name) -> dict:
     return {'medium.name': name, 'medium.density_g_per_mm3': density}
 
 
-__all__ = ['CONDITION_KEYS', 'SCENE_KEYS', 'conditions_of_scene', 'scene_for_conditions']
+__all__ = ['CONDITIONS', 'CONDITION_BY_KEY', 'CONDITION_KEYS', 'Condition', 'MEDIA', 'SCENE_KEYS',
+           'conditions_of_scene', 'scene_for_conditions']

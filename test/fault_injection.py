@@ -32,6 +32,7 @@ from sensor_msgs.msg import JointState
 
 from mantis_rig import contract
 from mantis_rig.nodes.trial_client import TrialClient
+from mantis_rig.stack.node_table import PROCESS_MODULES
 
 REPO = Path(__file__).resolve().parents[1]
 SCENE = 'air_23mm_rig'
@@ -167,7 +168,7 @@ class Bringup:
         if name == 'mantis':
             return self.process.pid
         for pid in children(self.process.pid):
-            if f'mantis_rig.nodes.{name}' in cmdline(pid):
+            if PROCESS_MODULES[name] in cmdline(pid):
                 return pid
         raise LookupError(f'no {name} process under {self.process.pid}')
 

@@ -9,14 +9,12 @@ other unreachable cases, in one line (exit 3).
 """
 from __future__ import annotations
 
-import contextlib
 import json
-import os
 from pathlib import Path
 import sys
 import time
 
-from mantis_rig.cli.trial_commands import NAMESPACE, _typed
+from mantis_rig.cli.options import ROS_NAMESPACE, supervisor_value
 from mantis_rig.faults import RIG_FAULT, USAGE_ERROR, StackError
 from mantis_rig.trial.supervisor_settings import (
     PARAMETERS,
@@ -24,8 +22,6 @@ from mantis_rig.trial.supervisor_settings import (
     TrialConditions,
     check_value,
 )
-
-from ..contract import START_TRIAL, resolve
 
 REACH_TIMEOUT_S = 10.0        # default: how long the supervisor has to answer
 STATUS_WAIT_S = 5.0           # how long the supervisor's status may lag behind its state
@@ -148,7 +144,7 @@ def supervisor_values(overrides) -> dict:
         if key not in PARAMETERS:
             raise ConditionError(f'--set {item!r}: unknown supervisor parameter {key!r}; '
                                  f'known: {", ".join(PARAMETERS)}')
-        value = _typed(key, text)
+        value = supervisor_value(key, text)
         if key == 'out':
             value = str(Path(value).expanduser().absolute())
         check_value(key, value)
@@ -163,53 +159,14 @@ def _check_together(client, values: dict) -> None:
     TrialConditions.from_mapping({**current, **values}).validate()
 
 
-@contextlib.contextmanager
 def rig_client(args):
-    """A TrialClient in the rig's namespace, spun in a context of its own, once the supervisor
-    has answered (StackError, one line, if it does not within --reach-timeout)."""
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
+    """The running rig's TrialClient for ``args`` (its namespace, --reach-timeout)."""
+    from mantis_rig.stack.command_session import rig_client as client_of_rig
 
-    from mantis_rig.runtime.executors import Spinner
-    from mantis_rig.runtime.ros_env import claim_local_domain
-
-    from ..nodes.trial_client import TrialClient
-
-    if args.namespace and not NAMESPACE.fullmatch(args.namespace):
+    if args.namespace and not ROS_NAMESPACE.fullmatch(args.namespace):
         raise ConditionError(f'--namespace {args.namespace!r}: expected an absolute ROS '
                              f'namespace such as /rig2')
-    own_domain = not os.environ.get('ROS_DOMAIN_ID')
-    claim_local_domain()
-    context = Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-    client = spinner = None
-    try:
-        client = TrialClient(namespace=args.namespace, context=context)
-        executor = SingleThreadedExecutor(context=context)
-        executor.add_node(client)
-        spinner = Spinner(executor, f'mantis {args.command}')
-        if not client.wait_for_supervisor(args.reach_timeout):
-            raise StackError(_unreachable(args, own_domain))
-        yield client
-    finally:
-        if spinner is not None:
-            spinner.stop()
-        if client is not None:
-            client.destroy_node()
-        rclpy.try_shutdown(context=context)
-
-
-def _unreachable(args, own_domain: bool) -> str:
-    where = resolve(START_TRIAL.name, args.namespace or '/')
-    domain = os.environ.get('ROS_DOMAIN_ID')
-    line = f'no supervisor answered at {where} within {args.reach_timeout:g} s (ROS domain ' \
-           f'{domain}'
-    if own_domain:
-        return line + ': ROS_DOMAIN_ID was not set, so this command took a domain of its own, ' \
-                      'where no rig runs; set it to the rig\'s)'
-    return line + '; is the rig up, in this namespace and domain?)'
+    return client_of_rig(args.command, args.namespace, args.reach_timeout)
 
 
 def _state(client, index: int) -> dict:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 
 from mantis_sim.errors import InputError
@@ -118,3 +119,27 @@ def given_conditions(args) -> dict:
                 raise ConditionError(f'{option}: {exc}') from None
             given[name] = value
     return given
+
+
+#: how a rig's stack may be laid out: every node in one process, or the rig apart
+PROCESSES = ('single', 'multi')
+#: an absolute ROS namespace, such as /rig2
+ROS_NAMESPACE = re.compile(r'(/[A-Za-z][A-Za-z0-9_]*)+')
+
+
+def supervisor_value(key: str, text: str):
+    """A supervisor parameter's value from its text on the command line (KEY=VALUE), typed as
+    its default is; ConditionError names a value that is not."""
+    from mantis_rig.trial.supervisor_settings import PARAMETERS, ConditionError
+
+    default = PARAMETERS[key].default
+    if isinstance(default, bool):
+        if text.lower() not in ('true', 'false', '1', '0', 'yes', 'no'):
+            raise ConditionError(f'{key} = {text!r} is not a boolean')
+        return text.lower() in ('true', '1', 'yes')
+    if isinstance(default, float):
+        try:
+            return float(text)
+        except ValueError:
+            raise ConditionError(f'{key} = {text!r} is not a number') from None
+    return text

@@ -1,82 +1,16 @@
 """`mantis replay`: republish a trial bag with its original timing."""
 from __future__ import annotations
 
-import threading
-
 from .options import err
 
 
 def run_replay(args) -> int:
-    import rclpy
-
-    from mantis_rig.runtime.ros_env import claim_local_domain
-
-    from ..replay import BagPlayer
-    from ..replay.schedule import raise_priority
-
-    claim_local_domain()
-    if args.realtime:
-        # Before rclpy.init: the DDS threads started there inherit the class, so a publish
-        # does not wait on a lock held by a preempted ordinary-priority DDS thread.
-        try:
-            raise_priority()
-        except OSError as exc:
-            err('replay', f'warning: real-time scheduling refused ({exc}); playing at normal '
-                           'priority')
-    from rclpy.signals import SignalHandlerOptions
-
-    from mantis_rig.runtime.lean_node import LeanNode
-    from mantis_rig.runtime.stopping import StopRequested, StopSignals
-
-    from ..contract import REPLAY_NODE
-    signals = StopSignals('mantis replay').install()    # 130 / 143, not rclpy's handler
-    rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO)
-    node = LeanNode(REPLAY_NODE)
-    stop = threading.Event()
-    relay = None
-    try:
-        if args.live:
-            from ..live import LiveRelay
-            relay = LiveRelay(args.live)
-            print(f'live view: {relay.url} (Foxglove: Open connection, Foxglove WebSocket)',
-                  flush=True)
-        player = BagPlayer(node, args.bag, rate=args.rate, loop=args.loop, topics=args.topics,
-                           clock_hz=args.clock, realtime=args.realtime,
-                           time_jumps=args.time_jumps)
-        for problem in player.report.problems:
-            err('replay', f'warning: {problem}; replaying the messages before the damage')
-        if args.wait_for_subscribers > 0 and not player.wait_for_subscribers(
-                args.wait_for_subscribers):
-            err('replay', f'warning: not every topic had a subscriber after '
-                           f'{args.wait_for_subscribers} s; playing anyway')
-        try:
-            # inside the try: a stop signal right after this line still ends with the report
-            print(f'replaying {args.bag} at {args.rate:g}x real time (Ctrl-C stops)', flush=True)
-            report = player.run(stop)
-        except StopRequested:
-            stop.set()
-            report = player.report
-            report.interrupted = True
-        signals.shield()
-        player.wait_for_delivery(timeout_s=2.0)
-        print(report)
-        if signals.first is not None:
-            err('replay', f'{signals.first.reason}')
-            return signals.first.exit_status
-        if not sum(report.published.values()):
-            err('replay', f'nothing was replayed from {args.bag}: no message to play'
-                           f'{" on the topics asked for" if args.topics else ""}')
-            return 1
-        return 0
-    except StopRequested as stop_requested:       # while setting up, before the playback
-        return stop_requested.exit_status
-    finally:
-        signals.shield()
-        if relay is not None:
-            relay.close()
-        node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    from mantis_rig.stack.replay_session import ReplayOptions, replay_on_ros
+    options = ReplayOptions(rate=args.rate, loop=args.loop, topics=args.topics,
+                            clock=args.clock, realtime=args.realtime,
+                            time_jumps=args.time_jumps,
+                            wait_for_subscribers=args.wait_for_subscribers, live=args.live)
+    return replay_on_ros(args.bag, options, lambda line: err('replay', line))
 
 
 def add_commands(commands) -> None:

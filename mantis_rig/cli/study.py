@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from mantis_rig.cli.options import PROCESSES
 from mantis_rig.cli.track_command import add_video_options
-from mantis_rig.cli.trial_commands import PROCESSES
 from mantis_rig.faults import RIG_FAULT, USAGE_ERROR
 from mantis_sim.errors import InputError
 
@@ -74,8 +74,14 @@ def run_study(args) -> int:
     if args.connect:
         from mantis_rig.study_session.session import run_connected
         return run_connected(plan, args)
+    from mantis_rig.cli.trial_commands import stack_config
+    from mantis_rig.study_session.runner import BAGS
     from mantis_rig.study_session.session import run_with_stack
-    return run_with_stack(plan, args)
+    directory = Path(args.out).resolve()
+    directory.mkdir(parents=True, exist_ok=True)
+    args.scene, args.out = plan.scene, directory / BAGS     # the trials' bags, in the study's
+    return run_with_stack(plan, stack_config(args), directory, log_dir=args.log_dir,
+                          ask=args.ask)
 
 
 def _directory(args) -> Path:

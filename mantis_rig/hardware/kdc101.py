@@ -99,7 +99,7 @@ class Kdc101Stage(Stage):
     (0 at home), in metres; the soft travel limits and the speed ceiling of `limits` hold
     whatever the caller asks, homing included (its velocity is set to `homing_speed_m_per_s`
     before every MOT_MOVE_HOME). The force ceiling needs the force: wrap the stage in
-    interfaces.StageGuard and feed it the load-cell readings."""
+    mantis_rig.trial.stage_guard.StageGuard and feed it the load-cell readings."""
 
     def __init__(self, port: str, counts_per_mm: float = Z8_COUNTS_PER_MM,
                  velocity_per_mm_s: Optional[float] = None,

@@ -28,11 +28,15 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
 from mantis_rig import backends, contract
-from mantis_rig.hardware.device_interfaces import CameraConfig, ConfigurationError, DeviceError
+from mantis_rig.hardware.device_interfaces import (
+    CameraConfig,
+    ConfigurationError,
+    DeviceError,
+    FilmError,
+)
 from mantis_rig.nodes.device_node import DeviceNode, time_msg
 from mantis_rig.recording.marker_block import MarkerFrames, marker_blocks_to_msgs
 from mantis_rig.runtime.executors import run_node
-from mantis_rig.simulated.sim_camera import FilmError
 
 FRAMES_TIMEOUT_S = 60.0
 FILM_DIR = 'film_dir'

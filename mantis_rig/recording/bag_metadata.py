@@ -2,6 +2,7 @@
 from dataclasses import dataclass, field
 import os
 from pathlib import Path
+import time
 
 import yaml
 
@@ -132,3 +133,17 @@ def read_metadata_yaml(path):
     if not isinstance(info, dict):
         raise MetadataFileError(f'{path}: no rosbag2_bagfile_information map')
     return info
+
+
+def wait_closed(bag_dir, timeout_s: float, failed=lambda: False) -> bool:
+    """Whether the bag at ``bag_dir`` was closed (its metadata.yaml written, the writer's last
+    step) within ``timeout_s`` of wall time; False as soon as ``failed()`` says it never will
+    be. The supervisor publishes a trial's end once its bag is closed, so this waits only on a
+    writer in another process or on a log that failed."""
+    deadline = time.monotonic() + timeout_s
+    metadata = Path(bag_dir) / METADATA_FILENAME
+    while not metadata.exists():
+        if time.monotonic() > deadline or failed():
+            return False
+        time.sleep(0.05)
+    return True

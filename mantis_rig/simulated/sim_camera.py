@@ -29,6 +29,7 @@ from mantis_rig.hardware.device_interfaces import (
     CameraTrigger,
     ConfigurationError,
     DeviceError,
+    FilmError,
     MarkerFrames,
     check_camera_config,
 )
@@ -42,10 +43,6 @@ FILM_TMP_SUFFIX = '.tmp'
 #: the poses a film renders from are taken finer than a frame where a point moves more than
 #: this from one frame to the next (mantis_sim.camera.recorded_pose.record_frames)
 FILM_TOLERANCE_PX = 0.002
-
-
-class FilmError(DeviceError):
-    """The simulated camera could not film its recording (says why)."""
 
 
 @dataclass(frozen=True)

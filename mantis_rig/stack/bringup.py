@@ -9,7 +9,7 @@
   SingleThreadedExecutor for the world, the supervisor and any node added with add_node() (a
   client), whose callbacks never block (mantis_rig.runtime.executors).
 * ``processes='multi'``: the supervisor in one process and the rig in others (sim: one
-  ``sim_rig`` process; hardware: one per device node), each ``python -m mantis_rig.nodes.<name>
+  ``sim_rig`` process; hardware: one per device node), each ``python -m <its module>
   --ros-args --params-file <stack.yaml>``: they talk over exactly the topics and services of
   the real rig, the supervisor on ``use_sim_time`` in sim mode. They inherit this process's
   environment, hence its ROS domain, each in a process group of its own. stop() signals them
@@ -48,7 +48,14 @@ from mantis_rig.runtime.executors import (
 from mantis_rig.runtime.memory import limit_malloc_arenas
 from mantis_rig.runtime.stopping import STOP_REASON_ENV
 from mantis_rig.simulated.sim_rig import DEVICE_THREADS, SimRig, release
-from mantis_rig.stack.node_table import DEVICES, SIM_RIG_PROCESS, STAGE_NODE, SUPERVISOR, WORLD
+from mantis_rig.stack.node_table import (
+    DEVICES,
+    PROCESS_MODULES,
+    SIM_RIG_PROCESS,
+    STAGE_NODE,
+    SUPERVISOR,
+    WORLD,
+)
 from mantis_rig.stack.watchdog import ProcessFault, ProcessWatch, stage_port, stop_stage_at_port
 
 SUPERVISOR_GRACE_S = 8.0    # its trial's abort: the stage's stop confirmed (2 s), the log closed
@@ -243,7 +250,7 @@ class Stack:
         self.executor.add_node(self._watch_node)
 
     def command(self, name: str) -> list:
-        return [sys.executable, '-m', f'mantis_rig.nodes.{name}', '--ros-args',
+        return [sys.executable, '-m', PROCESS_MODULES[name], '--ros-args',
                 '--params-file', str(self._params_file), *self.config.ros_arguments()]
 
     def _log(self, name: str):

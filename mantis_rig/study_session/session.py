@@ -14,7 +14,7 @@ from mantis_rig.contract import START_TRIAL, STUDY_CONTINUE, STUDY_NODE, resolve
 from mantis_rig.faults import StackError
 from mantis_rig.study_session.record import RECORD_NAME
 from mantis_rig.study_session.rig import ClientRig, PersonOperator, SimulatedOperator
-from mantis_rig.study_session.runner import BAGS, StudyRunner, StudySetup
+from mantis_rig.study_session.runner import StudyRunner, StudySetup
 from mantis_sim.studies.rig_study.plan import StudyPlan
 
 FINAL_STATES = ('done', 'aborted')
@@ -69,32 +69,30 @@ def _setup(plan: StudyPlan, args, overrides: list) -> StudySetup:
                       scene_overrides=tuple(overrides))
 
 
-def run_with_stack(plan: StudyPlan, args) -> int:
-    """Bring the rig up (args as `mantis trial`'s) and run the plan on it."""
-    from mantis_rig.cli.trial_commands import _ros_session
-    directory = Path(args.out).resolve()
-    directory.mkdir(parents=True, exist_ok=True)
-    args.scene = plan.scene
-    args.study_directory = directory
-    args.out = directory / BAGS
-    return _ros_session(lambda config, a, signals: _with_stack(plan, config, a, signals), args)
+def run_with_stack(plan: StudyPlan, config, directory: Path, *, log_dir=None,
+                   ask: bool = False) -> int:
+    """Bring the rig up (``config``: a StackConfig, as `mantis trial` builds it, its bags under
+    ``directory``/bags) and run the plan on it; the study's record in ``directory``."""
+    from mantis_rig.stack.command_session import ros_session
+    return ros_session('study', lambda signals: _with_stack(plan, config, directory, log_dir,
+                                                            ask, signals))
 
 
-def _with_stack(plan: StudyPlan, config, args, signals) -> int:
+def _with_stack(plan: StudyPlan, config, directory: Path, log_dir, ask: bool, signals) -> int:
     from mantis_rig.nodes.trial_client import TrialClient
     from mantis_rig.stack.bringup import Stack
     from mantis_rig.study_session.analyst import Analyst
 
-    stack = Stack(config, log_dir=args.log_dir)
+    stack = Stack(config, log_dir=log_dir)
     signals.emergency_stop = stack.emergency_stop
     client = TrialClient(namespace=config.namespace)
     stack.add_node(client)
     node, proceed = _continue_node(config.namespace)
     stack.add_node(node)
-    args.out = args.study_directory
-    setup = _setup(plan, args, config.scene_overrides if config.sim else [])
+    setup = StudySetup(plan=plan, directory=directory,
+                       scene_overrides=tuple(config.scene_overrides if config.sim else []))
     analyst = Analyst()
-    runner = StudyRunner(setup, None, _operator(args.ask or not config.sim, config.namespace,
+    runner = StudyRunner(setup, None, _operator(ask or not config.sim, config.namespace,
                                                 proceed), analyst, say=_say, progress=Progress())
     report = None
     try:

@@ -14,11 +14,11 @@ import math
 
 from mantis_rig.contract import (  # noqa: F401 - the names this module has always offered
     BACKENDS,
-    CONDITION_KEYS,
     FORCE_CEILING,
     MAX_SPEED_MM_S,
     MAX_TRAVEL_MM,
     MEDIA,
+    RECORDED_CONDITION_KEYS,
     SUPERVISOR_PARAMETERS,
     ParamSpec,
 )

@@ -156,10 +156,10 @@ def test_bad_input_and_rig_faults_have_roots_of_their_own():
     swallow a refusal); the device and stack faults stand under RigFault, not under it."""
     from mantis_rig import faults
     from mantis_rig.analysis.inputs import TrackFormatError
+    from mantis_rig.faults import StackError
     from mantis_rig.hardware.device_interfaces import DeviceError
     from mantis_rig.recording import BagClosedError, BagError, BagWriteError
     from mantis_rig.simulated.world_port import WorldTimeout
-    from mantis_rig.stack.bringup import StackError
     from mantis_sim.errors import InputError
     from mantis_sim.scene import SceneError
 

@@ -157,17 +157,17 @@ def test_a_day_s_offset_is_taken_at_the_strike_s_own_angle_not_the_scene_s():
 def test_a_day_its_mean_angle_cannot_take_is_not_written_and_says_why(tmp_path):
     from pathlib import Path
 
-    from mantis_rig.cli import day_state_command as cli
     from mantis_sim.scene import available_scenes
+    from mantis_sim.studies.real_strikes.day_state_run import write_day_scenes
     scene = load_scene('water_23mm')
     strikes = [RealStrike(f'{day}_{k}', 'water', 23.0, 3.0, 2.3, day)
                for day in ('ok', 'bad') for k in range(2)]
     states = [ds.DayState('water_23mm', 'ok', 1.5, 0.1, 2, False),
               ds.DayState('water_23mm', 'bad', -4.0, 0.1, 2, False)]
     param = ident.parse_free_parameter(ds.DEFAULT_DAY_KEY, {'water_23mm': scene})
-    written, refused = cli._write_scenes(tmp_path, {'water_23mm': scene},
-                                         {'water_23mm': Path(available_scenes()['water_23mm'])},
-                                         param, states, strikes)
+    written, refused = write_day_scenes(tmp_path, {'water_23mm': scene},
+                                        {'water_23mm': Path(available_scenes()['water_23mm'])},
+                                        param, states, strikes)
     assert [Path(p).name for p in written] == ['water_23mm_ok.yaml']
     assert load_scene_file(tmp_path / 'water_23mm_ok.yaml').geometry.latched_angle_deg == 4.5
     assert len(refused) == 1 and refused[0].startswith('water_23mm bad:')

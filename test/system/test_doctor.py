@@ -18,9 +18,11 @@ import serial.tools.list_ports
 from serial.tools.list_ports_common import ListPortInfo
 
 from mantis_rig.backends import make_stage
-from mantis_rig.cli import doctor
-from mantis_rig.cli.doctor_params import RigParams, load_params
 from mantis_rig.cli.main import main
+from mantis_rig.commissioning.check_report import FAIL, OK, WARN, Options, Report
+from mantis_rig.commissioning.checks import run_checks
+from mantis_rig.commissioning.environment_checks import check_ros_environment
+from mantis_rig.commissioning.rig_params import RigParams, load_params
 from mantis_rig.hardware import discovery
 from mantis_rig.hardware.discovery import DiscoveryError, choose_kdc101
 
@@ -92,12 +94,12 @@ def rig_params(tmp_path, port='/dev/ttyUSB0', serial_number='', channel='Dev1/ai
 
 
 def run_doctor(params_path, **options):
-    report = doctor.run_checks(doctor.Options(params=load_params(params_path), **options))
+    report = run_checks(Options(params=load_params(params_path), **options))
     return report, {c.name: c for c in report.checks}
 
 
 def assert_fail(check, *words):
-    assert check.status == doctor.FAIL, check.line()
+    assert check.status == FAIL, check.line()
     line = check.line()
     assert '\n' not in line and ' -- fix: ' in line, line
     for word in words:
@@ -220,7 +222,7 @@ def test_move_homes_jogs_and_returns(tmp_path, ports, make_emulator, make_daq, s
                                 jog_m=0.3e-3)
     assert not report.failed, [c.line() for c in report.checks]
     motion = checks['stage: motion']
-    assert motion.status == doctor.OK and 'homed at 0.000 mm -> 0.900 mm -> 0.600 mm' in \
+    assert motion.status == OK and 'homed at 0.000 mm -> 0.900 mm -> 0.600 mm' in \
         motion.found, motion.line()
     assert report.stage_status == ('streaming' if streams_status else 'polling')
     assert emu.position_mm == pytest.approx(0.6, abs=1e-4) and not emu.moving
@@ -298,7 +300,7 @@ def test_a_controller_that_does_not_report_its_stage_is_a_warning(tmp_path, port
     make_daq()
     emu = make_emulator(stage_part=None)
     report, checks = run_doctor(rig_params(tmp_path, port=emu.port))
-    assert checks['stage: type'].status == doctor.WARN and not report.failed
+    assert checks['stage: type'].status == WARN and not report.failed
     assert 'Kinesis' in checks['stage: type'].fix
 
 
@@ -329,7 +331,7 @@ def test_a_noisy_load_cell(tmp_path, ports, make_daq):
 def test_a_slightly_noisy_load_cell_is_a_warning(tmp_path, ports, make_daq):
     make_daq(signal_v=quiet_cell(noise_v=0.1 / NEWTONS_PER_VOLT))      # 0.1 N rms
     _, checks = run_doctor(rig_params(tmp_path))
-    assert checks['load cell: at rest'].status == doctor.WARN
+    assert checks['load cell: at rest'].status == WARN
     assert 'noise above the calibration' in checks['load cell: at rest'].found
 
 
@@ -404,16 +406,16 @@ def test_parameters_file_is_the_stacks_own(tmp_path):
 
 
 def test_ros_environment_warns_off_localhost():
-    report = doctor.Report()
-    doctor.check_ros_environment(report, {'ROS_DOMAIN_ID': '7',
-                                          'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'})
+    report = Report()
+    check_ros_environment(report, {'ROS_DOMAIN_ID': '7',
+                                   'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'})
     checks = {c.name: c for c in report.checks}
-    assert checks['ros: domain'].status == doctor.OK
-    assert checks['ros: discovery range'].status == doctor.WARN
+    assert checks['ros: domain'].status == OK
+    assert checks['ros: discovery range'].status == WARN
     assert 'LOCALHOST' in checks['ros: discovery range'].fix
-    report = doctor.Report()
-    doctor.check_ros_environment(report, {'ROS_DOMAIN_ID': 'seven'})
-    assert report.checks[0].status == doctor.FAIL
+    report = Report()
+    check_ros_environment(report, {'ROS_DOMAIN_ID': 'seven'})
+    assert report.checks[0].status == FAIL
 
 
 # --- the simulated rig, as CI runs it ------------------------------------------------------------
@@ -421,8 +423,7 @@ def test_ros_environment_warns_off_localhost():
 @pytest.mark.slow
 def test_sim_backend_with_move(tmp_path):
     params = RigParams(out=str(tmp_path))
-    report = doctor.run_checks(doctor.Options(backend='sim', params=params, move=True,
-                                              jog_m=0.3e-3))
+    report = run_checks(Options(backend='sim', params=params, move=True, jog_m=0.3e-3))
     statuses = {c.name: c.status for c in report.checks}
     assert not report.failed, [c.line() for c in report.checks]
-    assert statuses['stage: motion'] == doctor.OK and statuses['load cell: at rest'] == doctor.OK
+    assert statuses['stage: motion'] == OK and statuses['load cell: at rest'] == OK

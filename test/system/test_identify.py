@@ -406,9 +406,9 @@ def test_identify_refuses_bad_input_before_any_work(tmp_path, capsys, extra, mes
 def test_a_tracker_export_gives_the_strike_s_motion_through_the_rig_s_analysis():
     """`--export TRIAL=PATH`: the export analysed, timed from its own phase IV, cut to the
     strike: the body turns back and the arm swings out, as in the authors' record."""
-    from mantis_rig.cli.real_strike_commands import _export_series
+    from mantis_rig.analysis.strike_series import export_series
     strike = next(s for s in read_summary_table(data_file(TABLE)) if s.trial == AIR23)
-    series = _export_series(data_file('real_trials/air_23mm_19kfps_ma3.xlsx'), strike)
+    series = export_series(data_file('real_trials/air_23mm_19kfps_ma3.xlsx'), strike)
     assert series.t_s[0] < -0.01 and series.t_s[-1] > 0.01
     at = {t: np.interp(t, series.t_s, series.theta1_rad) for t in (0.0, 5e-3)}
     arm = {t: np.interp(t, series.t_s, series.theta3_rad) for t in (0.0, 5e-3)}

@@ -28,10 +28,10 @@ from mantis_rig.hardware.device_interfaces import (
     DeviceError,
     ForceBlock,
     SafetyLimitError,
-    StageGuard,
     StageLimits,
 )
 from mantis_rig.hardware.kdc101 import Kdc101Stage
+from mantis_rig.trial.stage_guard import StageGuard
 
 pytestmark = pytest.mark.timeout(30)
 

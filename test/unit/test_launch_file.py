@@ -16,8 +16,16 @@ from mantis_rig.cli.trial_commands import stack_config
 from mantis_rig.contract import STAGE_NODE
 from mantis_rig.nodes.device_node import COMMON_PARAMETERS
 from mantis_rig.simulated import sim_world_node
-from mantis_rig.stack.node_table import BY_NAME, DEVICES, SIM_RIG_PROCESS, SUPERVISOR, WORLD
+from mantis_rig.stack.node_table import (
+    BY_NAME,
+    DEVICES,
+    PROCESS_MODULES,
+    SIM_RIG_PROCESS,
+    SUPERVISOR,
+    WORLD,
+)
 from mantis_rig.trial.supervisor_settings import PARAMETERS as SUPERVISOR_PARAMETERS
+from mantis_sim.trial_conditions import CONDITION_KEYS
 
 REPO = Path(__file__).resolve().parents[2]
 LAUNCH_FILE = REPO / 'launch' / 'mantis_rig.launch.py'
@@ -160,6 +168,27 @@ def test_the_parameters_are_bringups(launch_file, backend):
         bringup_config(backend).node_parameters()
 
 
+def test_a_scene_with_a_latch_offset_gives_the_supervisor_the_same_conditions(launch_file,
+                                                                              tmp_path):
+    """The arm of this scene sits 4 degrees past its recorded contact angle: the launch file and
+    `mantis bringup` both give the supervisor the contact angle as recorded (the world adds the
+    offset), and every other condition the same."""
+    scene = tmp_path / 'offset_latch.yaml'
+    scene.write_text('name: offset_latch\ndescription: a latch offset of 4 degrees\n'
+                     'effects: []\ngeometry: {d_t_mm: 19.0, contact_angle_deg: 3.0, '
+                     'latch_offset_deg: 4.0}\nmedium: {name: air}\ntendon: {model: rigid}\n'
+                     'drive: {pull_speed_mm_per_s: 1.5}\n',
+                     encoding='utf-8')
+    launched = launch_file['node_parameters']('sim', str(scene), 0, 1.0, 'trials')
+    brought_up = stack_config(build_parser().parse_args(
+        ['bringup', '--processes', 'multi', '--scene', str(scene)])).node_parameters()
+    for key in CONDITION_KEYS:
+        assert launched[SUPERVISOR.name][key] == brought_up[SUPERVISOR.name][key], key
+    assert launched[SUPERVISOR.name]['contact_angle_deg'] == 3.0
+    assert (launched[SUPERVISOR.name]['d_t_mm'], launched[SUPERVISOR.name]['pull_speed_mm_s']) \
+        == (19.0, 1.5)
+
+
 def test_the_launch_arguments_default_to_bringups(launch_file):
     args = build_parser().parse_args(['bringup'])
     defaults = {name: default for name, (default, _) in launch_file['ARGUMENTS'].items()}
@@ -167,6 +196,19 @@ def test_the_launch_arguments_default_to_bringups(launch_file):
                         'real_time_factor': str(args.real_time_factor), 'out': str(args.out)}
     assert launch_file['DEVICE_NODES'] == tuple(d.name for d in DEVICES)
     assert SIM_RIG_PROCESS in launch_file['processes']('sim')
+
+
+def test_each_process_s_console_script_runs_the_module_bringup_starts():
+    """setup.py's NODES (the console scripts `ros2 run` and the launch file start) name the same
+    module as the node table's PROCESS_MODULES (what `mantis bringup --processes multi` runs
+    with python -m), and each module exists."""
+    tree = ast.parse((REPO / 'setup.py').read_text(encoding='utf-8'))
+    nodes = next(ast.literal_eval(node.value) for node in ast.walk(tree)
+                 if isinstance(node, ast.Assign) and any(
+                     isinstance(t, ast.Name) and t.id == 'NODES' for t in node.targets))
+    for name, module in PROCESS_MODULES.items():
+        assert nodes.get(name) == f'{module}:main', name
+        assert REPO.joinpath(*module.split('.')).with_suffix('.py').exists(), module
 
 
 def test_setup_installs_the_launch_file():

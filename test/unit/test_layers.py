@@ -208,3 +208,81 @@ def test_the_simulator_s_public_face():
         assert name in mantis_sim.__all__ and getattr(mantis_sim, name) is not None
     from mantis_sim.results import SimulationResult, simulate
     assert mantis_sim.simulate is simulate and mantis_sim.SimulationResult is SimulationResult
+
+
+# ---------------------------------------------------------------- no import climbs a layer
+#: The layers of docs/architecture.md, lowest first: (layer, the modules it holds as dotted
+#: prefixes). A module belongs to the layer of its longest matching prefix: the simulated rig's
+#: wing (mantis_rig.simulated) sits at the layers of its modules' roles.
+LAYERS = (
+    ('the simulator of one design', ('mantis_sim',)),
+    ('studies of many strikes', ('mantis_sim.studies',)),
+    ('the rig\'s faults', ('mantis_rig.faults', 'mantis_rig')),
+    ('devices', ('mantis_rig.hardware', 'mantis_rig.simulated.sim_stage',
+                 'mantis_rig.simulated.sim_force', 'mantis_rig.simulated.sim_camera',
+                 'mantis_rig.simulated.world_port', 'mantis_rig.simulated.local_world')),
+    ('the contract', ('mantis_rig.contract',)),
+    ('trial logic', ('mantis_rig.trial',)),
+    ('device backends', ('mantis_rig.backends',)),
+    ('recording, replay, analysis, video',
+     ('mantis_rig.recording', 'mantis_rig.replay', 'mantis_rig.analysis', 'mantis_rig.video')),
+    ('commissioning', ('mantis_rig.commissioning',)),
+    ('node runtime', ('mantis_rig.runtime',)),
+    ('nodes', ('mantis_rig.nodes', 'mantis_rig.simulated.sim_world_node',
+               'mantis_rig.simulated.shared_clock', 'mantis_rig.live')),
+    ('the stack', ('mantis_rig.stack', 'mantis_rig.simulated.sim_rig',
+                   'mantis_rig.simulated')),
+    ('a study on the rig', ('mantis_rig.study_session',)),
+    ('command line', ('mantis_rig.cli',)),
+)
+
+
+def layer_of(module: str) -> int:
+    best, found = -1, None
+    for index, (_, prefixes) in enumerate(LAYERS):
+        for prefix in prefixes:
+            if (module == prefix or module.startswith(prefix + '.')) and len(prefix) > best:
+                best, found = len(prefix), index
+    assert found is not None, f'{module}: in no layer of LAYERS'
+    return found
+
+
+def climbing_imports(graph: dict) -> list:
+    return sorted(f'{a} ({LAYERS[layer_of(a)][0]}) imports {b} ({LAYERS[layer_of(b)][0]})'
+                  for a in graph for b in graph[a] if layer_of(b) > layer_of(a))
+
+
+def test_no_import_climbs_a_layer():
+    climbing = climbing_imports(_graph())
+    assert not climbing, 'imports from a lower layer into a higher one:\n' + '\n'.join(climbing)
+
+
+def test_the_check_finds_a_climbing_import():
+    graph = {'mantis_rig.hardware.kdc101': {'mantis_rig.nodes.stage_node'},
+             'mantis_rig.nodes.stage_node': {'mantis_rig.hardware.kdc101'}}
+    assert climbing_imports(graph) == [
+        'mantis_rig.hardware.kdc101 (devices) imports mantis_rig.nodes.stage_node (nodes)']
+
+
+def test_nothing_outside_the_command_line_imports_it():
+    graph = _graph()
+    wrong = sorted(f'{a} -> {b}' for a in graph for b in graph[a]
+                   if b.startswith('mantis_rig.cli') and not a.startswith('mantis_rig.cli'))
+    assert not wrong, wrong
+
+
+def test_each_layer_is_in_the_architecture_document():
+    text = (REPO / 'docs' / 'architecture.md').read_text(encoding='utf-8')
+    missing = [name for name, _ in LAYERS if f'| {name} |' not in text]
+    assert not missing, f'layers not in docs/architecture.md\'s table: {missing}'
+
+
+def test_the_nodes_know_no_backend():
+    """A device node is given its device by mantis_rig.backends: no node module imports a
+    driver or the simulated rig's wing (the device interfaces are what it calls)."""
+    graph = _graph()
+    wrong = sorted(f'{a} -> {b}' for a in graph if a.startswith('mantis_rig.nodes')
+                   for b in graph[a] if b.startswith('mantis_rig.simulated') or (
+                       b.startswith('mantis_rig.hardware') and
+                       b != 'mantis_rig.hardware.device_interfaces'))
+    assert not wrong, wrong

@@ -1,6 +1,6 @@
 """`mantis trial` and `mantis bringup` without ROS: the options into a stack's configuration,
 and how a node process on its way out is told from a device fault once a trial of a
-multi-process stack has been aborted (mantis_rig.cli.trial_commands._name_a_dying_process)."""
+multi-process stack has been aborted (mantis_rig.stack.stack_runs._name_a_dying_process)."""
 import time
 
 import pytest
@@ -9,6 +9,7 @@ from mantis_rig.cli import trial_commands as cli_trial
 from mantis_rig.cli.main import build_parser
 from mantis_rig.faults import StackError
 from mantis_rig.runtime.stopping import PROCESS_STOPPING
+from mantis_rig.stack import stack_runs
 from mantis_rig.trial.supervisor_settings import ConditionError
 
 
@@ -31,17 +32,17 @@ class SlowlyEndingStack:
     f'({PROCESS_STOPPING}: interrupted by SIGTERM)',
     'device fault: camera_node: left the active state (now shuttingdown)'])
 def test_a_process_on_its_way_out_is_waited_for_past_the_grace(reason):
-    stack = SlowlyEndingStack(ends_after_s=2 * cli_trial.DYING_PROCESS_GRACE_S)
+    stack = SlowlyEndingStack(ends_after_s=2 * stack_runs.DYING_PROCESS_GRACE_S)
     with pytest.raises(StackError, match='sim_rig'):
-        cli_trial._name_a_dying_process(stack, lambda: reason)
+        stack_runs._name_a_dying_process(stack, lambda: reason)
 
 
 def test_another_abort_is_reported_after_the_grace():
     stack = SlowlyEndingStack()
     started = time.monotonic()
-    cli_trial._name_a_dying_process(stack, lambda: 'force ceiling 12 N exceeded')
-    assert cli_trial.DYING_PROCESS_GRACE_S <= time.monotonic() - started \
-        < cli_trial.SHUT_DOWN_NODE_EXIT_S
+    stack_runs._name_a_dying_process(stack, lambda: 'force ceiling 12 N exceeded')
+    assert stack_runs.DYING_PROCESS_GRACE_S <= time.monotonic() - started \
+        < stack_runs.SHUT_DOWN_NODE_EXIT_S
 
 
 @pytest.mark.parametrize('namespace', ['/rig2', '/lab/rig_2'])

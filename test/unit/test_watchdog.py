@@ -169,7 +169,7 @@ def test_a_launch_shutting_down_reports_nothing(tmp_path):
 
 
 def test_the_line_says_what_became_of_the_trials_bag(tmp_path):
-    from mantis_rig.cli.trial_commands import fault_line
+    from mantis_rig.stack.stack_runs import fault_line
     from mantis_rig.stack.watchdog import ProcessFault
     fault = ProcessFault('supervisor_node', 'was killed by SIGKILL', ended=True)
     bag = tmp_path / 'trial_20261128_070000'

@@ -38,9 +38,8 @@ import numpy as np
 import yaml
 
 from mantis_sim.errors import InputError
+from mantis_sim.trial_conditions import CONDITION_KEYS  # what a plan may vary or fix
 
-#: The trial conditions a plan may vary or fix: the supervisor's (mantis_sim.trial_conditions).
-CONDITION_KEYS = ('pull_speed_mm_s', 'd_t_mm', 'contact_angle_deg', 'medium')
 ORDERS = ('random', 'as-listed', 'split-plot')
 PLAN_KEYS = ('scene', 'factors', 'repeats', 'order', 'seed', 'fixed', 'hard_to_change',
              'smallest_effect', 'robots', 'description', 'video')
