@@ -286,3 +286,13 @@ def test_the_nodes_know_no_backend():
                        b.startswith('mantis_rig.hardware') and
                        b != 'mantis_rig.hardware.device_interfaces'))
     assert not wrong, wrong
+
+
+def test_every_folder_of_modules_is_a_package_setup_installs():
+    """setup.py installs what find_packages finds: a folder of modules without an __init__.py
+    would be left out of a colcon or pip install (mantis_rig/study once was)."""
+    from setuptools import find_packages
+    found = set(find_packages(str(REPO), exclude=['test', 'test.*', 'bench', 'bench.*']))
+    folders = {'.'.join(p.parent.relative_to(REPO).parts) for package in PACKAGES
+               for p in (REPO / package).rglob('*.py') if '__pycache__' not in p.parts}
+    assert folders <= found, f'not installed (no __init__.py): {sorted(folders - found)}'
