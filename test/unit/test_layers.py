@@ -46,6 +46,7 @@ def test_the_markers_are_registered(pytestconfig):
 # not run and do not count. A package's own __init__ run before its submodules is Python's
 # doing, not an import the code wrote: no edge.
 import ast  # noqa: E402
+import functools  # noqa: E402
 
 REPO = TEST_DIR.parent
 PACKAGES = ('mantis_sim', 'mantis_rig')
@@ -62,6 +63,7 @@ def _module_name(path: Path) -> str:
     return '.'.join(parts[:-1] if parts[-1] == '__init__' else parts)
 
 
+@functools.cache
 def _modules() -> dict:
     return {_module_name(p): p for package in PACKAGES for p in sorted((REPO / package).rglob(
         '*.py'))}
@@ -76,11 +78,16 @@ def _type_checking_only(tree: ast.AST) -> set:
     return skipped
 
 
+@functools.cache
+def _parsed(path: Path) -> tuple:
+    tree = ast.parse(path.read_text(encoding='utf-8'), str(path))
+    return tree, _type_checking_only(tree)
+
+
 def _imports(module: str, path: Path, modules: dict):
     """(imported module of the two packages, line, the imported names) of each import in the
     module, wherever it stands."""
-    tree = ast.parse(path.read_text(encoding='utf-8'), str(path))
-    skipped = _type_checking_only(tree)
+    tree, skipped = _parsed(path)
     for node in ast.walk(tree):
         if id(node) in skipped or not isinstance(node, (ast.Import, ast.ImportFrom)):
             continue
@@ -102,6 +109,12 @@ def _imports(module: str, path: Path, modules: dict):
 
 
 def _graph() -> dict:
+    """A fresh copy of the import graph (tests change theirs), read once per session."""
+    return {module: set(targets) for module, targets in _read_graph().items()}
+
+
+@functools.cache
+def _read_graph() -> dict:
     modules = _modules()
     graph = {m: set() for m in modules}
     for module, path in modules.items():

@@ -13,6 +13,14 @@ from mantis_rig.stack import stack_runs
 from mantis_rig.trial.supervisor_settings import ConditionError
 
 
+@pytest.fixture
+def short_grace(monkeypatch):
+    """The grace and the wait for a node on its way out, shortened: what is tested is which of
+    them applies, not their length."""
+    monkeypatch.setattr(stack_runs, 'DYING_PROCESS_GRACE_S', 0.1)
+    monkeypatch.setattr(stack_runs, 'SHUT_DOWN_NODE_EXIT_S', 1.5)
+
+
 class SlowlyEndingStack:
     """A stack whose rig process ends (check_processes raises) ``ends_after_s`` from now, or
     never."""
@@ -31,13 +39,13 @@ class SlowlyEndingStack:
     f'device fault: stage_node: device error: move to 10 mm was stopped at 13 mm '
     f'({PROCESS_STOPPING}: interrupted by SIGTERM)',
     'device fault: camera_node: left the active state (now shuttingdown)'])
-def test_a_process_on_its_way_out_is_waited_for_past_the_grace(reason):
+def test_a_process_on_its_way_out_is_waited_for_past_the_grace(reason, short_grace):
     stack = SlowlyEndingStack(ends_after_s=2 * stack_runs.DYING_PROCESS_GRACE_S)
     with pytest.raises(StackError, match='sim_rig'):
         stack_runs._name_a_dying_process(stack, lambda: reason)
 
 
-def test_another_abort_is_reported_after_the_grace():
+def test_another_abort_is_reported_after_the_grace(short_grace):
     stack = SlowlyEndingStack()
     started = time.monotonic()
     stack_runs._name_a_dying_process(stack, lambda: 'force ceiling 12 N exceeded')
