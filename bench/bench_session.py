@@ -31,54 +31,37 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 
 from bench.machine import stamp  # noqa: E402
 from mantis_rig.nodes.trial_client import TrialClient  # noqa: E402
+from mantis_rig.runtime import process_state  # noqa: E402
 from mantis_rig.runtime.ros_env import claim_free_domain, release_domain  # noqa: E402
 
 TRIAL_TIMEOUT_S = 300.0
-TICKS_PER_S = os.sysconf('SC_CLK_TCK')
-
-
-def process_tree(root: int) -> list[int]:
-    """root and every descendant, from /proc."""
-    children: dict[int, list[int]] = {}
-    for entry in Path('/proc').iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            ppid = int((entry / 'stat').read_text().rsplit(')', 1)[1].split()[1])
-        except (OSError, IndexError, ValueError):
-            continue
-        children.setdefault(ppid, []).append(int(entry.name))
-    tree, todo = [], [root]
-    while todo:
-        pid = todo.pop()
-        tree.append(pid)
-        todo.extend(children.get(pid, []))
-    return tree
 
 
 def tree_usage(root: int) -> dict:
     """RSS (MiB), open fds and CPU s (user + system) summed over the tree; /dev/shm files."""
     rss_kib = fds = 0
-    cpu_ticks = 0
+    cpu_s = 0.0
     by_process = {}
-    pids = process_tree(root)
+    pids = process_state.tree(root)
     for pid in pids:
-        proc = Path('/proc') / str(pid)
+        proc = process_state.PROC / str(pid)
         try:
             status = (proc / 'status').read_text()
             rss = int(next(line.split()[1] for line in status.splitlines()
                            if line.startswith('VmRSS:')))
-            rss_kib += rss
-            name = (proc / 'cmdline').read_bytes().split(b'\0')
-            by_process[' '.join(a.decode() for a in name[1:3])] = rss / 1024
-            fds += len(os.listdir(proc / 'fd'))
-            fields = (proc / 'stat').read_text().rsplit(')', 1)[1].split()
-            cpu_ticks += int(fields[11]) + int(fields[12])
+            fd_count = len(os.listdir(proc / 'fd'))
         except (OSError, StopIteration):
             continue
+        state = process_state.read(pid)
+        if state is None:
+            continue
+        rss_kib += rss
+        by_process[' '.join(process_state.argv(pid)[1:3])] = rss / 1024
+        fds += fd_count
+        cpu_s += state.cpu_s
     shm = sum(1 for name in os.listdir('/dev/shm') if name.startswith(('fastrtps', 'fast_')))
     return {'processes': len(pids), 'rss_mib': rss_kib / 1024, 'fds': fds,
-            'shm_files': shm, 'cpu_s': cpu_ticks / TICKS_PER_S, 'by_process': by_process}
+            'shm_files': shm, 'cpu_s': cpu_s, 'by_process': by_process}
 
 
 def run_session(trials: int, processes: str, out: Path) -> dict:
@@ -123,7 +106,7 @@ def run_session(trials: int, processes: str, out: Path) -> dict:
                   f'{usage["processes"]}; MiB by process: '
                   + ', '.join(f'{k}: {v:.0f}' for k, v in usage['by_process'].items()),
                   flush=True)
-        tree = process_tree(bringup.pid)
+        tree = process_state.tree(bringup.pid)
         bringup.send_signal(signal.SIGINT)
         try:
             bringup.wait(timeout=30)
@@ -131,7 +114,7 @@ def run_session(trials: int, processes: str, out: Path) -> dict:
             bringup.kill()
             bringup.wait()
         time.sleep(1.0)
-        left = [pid for pid in tree if Path(f'/proc/{pid}').exists()]
+        left = [pid for pid in tree if process_state.read(pid) is not None]
     finally:
         if bringup.poll() is None:       # the bench itself failed: leave nothing running
             bringup.kill()

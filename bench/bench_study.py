@@ -25,9 +25,11 @@ import time
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / 'test'))
 
 import rclpy  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from session_command import mantis, mantis_argv  # noqa: E402
 
 from bench.machine import stamp  # noqa: E402
 from mantis_rig.nodes.trial_client import TrialClient  # noqa: E402
@@ -54,30 +56,28 @@ def run_bare(plan, out: Path) -> tuple[float, int, float]:
     """(wall s from the bring-up's start to its exit, trials done, CPU s of its processes)."""
     cpu0 = children_cpu_s()
     start = time.monotonic()
-    bringup = subprocess.Popen(
-        [sys.executable, '-m', 'mantis_rig.cli', 'bringup', '--backend', 'sim',
-         '--real-time-factor', '0', '--out', str(out)], cwd=REPO, stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL, start_new_session=True)
-    rclpy.init()
-    client = TrialClient()
-    executor = SingleThreadedExecutor()
-    executor.add_node(client)
-    spinner = Spinner(executor, 'bench')
-    done = 0
-    try:
-        assert client.wait_for_supervisor(120.0), 'no supervisor'
-        for trial in plan.trials():
-            ok, why = client.set_parameters({**trial.conditions, 'out': str(out)})
-            assert ok, why
-            started, message, final = client.run_trial(300.0)
-            assert started, message
-            done += final == 'done'
-    finally:
-        spinner.stop()
-        client.destroy_node()
-        rclpy.shutdown()
-        os.killpg(bringup.pid, signal.SIGINT)
-        bringup.wait(60)
+    with mantis('bringup', '--backend', 'sim', '--real-time-factor', '0', '--out', out) \
+            as bringup:
+        rclpy.init()
+        client = TrialClient()
+        executor = SingleThreadedExecutor()
+        executor.add_node(client)
+        spinner = Spinner(executor, 'bench')
+        done = 0
+        try:
+            assert client.wait_for_supervisor(120.0), 'no supervisor:\n' + bringup.tail()
+            for trial in plan.trials():
+                ok, why = client.set_parameters({**trial.conditions, 'out': str(out)})
+                assert ok, why
+                started, message, final = client.run_trial(300.0)
+                assert started, message
+                done += final == 'done'
+        finally:
+            spinner.stop()
+            client.destroy_node()
+            rclpy.shutdown()
+            bringup.signal_group(signal.SIGINT)
+            bringup.finish(60)
     return time.monotonic() - start, done, children_cpu_s() - cpu0
 
 
@@ -85,9 +85,8 @@ def run_study(plan_path: Path, out: Path) -> tuple[float, int, float]:
     cpu0 = children_cpu_s()
     start = time.monotonic()
     status = subprocess.run(
-        [sys.executable, '-m', 'mantis_rig.cli', 'study', str(plan_path), '--out', str(out),
-         '--real-time-factor', '0'], cwd=REPO, stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL, check=False).returncode
+        mantis_argv('study', plan_path, '--out', out, '--real-time-factor', '0'), cwd=REPO,
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=False).returncode
     wall = time.monotonic() - start
     assert status == 0, f'mantis study exited {status}'
     rows = read_record(out / 'study.csv').rows

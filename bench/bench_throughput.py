@@ -37,12 +37,13 @@ import time
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-TICK = os.sysconf('SC_CLK_TCK')
-
 
 def cpu_seconds(pid: int) -> float:
-    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / TICK      # utime, stime
+    from mantis_rig.runtime.process_state import read
+    state = read(pid)
+    if state is None:
+        raise ProcessLookupError(f'process {pid} is gone')
+    return state.cpu_s      # utime + stime
 
 
 # ------------------------------------------------------------------------------- roles

@@ -29,8 +29,13 @@ import time
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / 'test'))
+
+from session_command import SessionCommand, mantis_argv  # noqa: E402
 
 from mantis_rig.recording.trial_summary import summarize  # noqa: E402
+
+TRIAL_START_WAIT_S = 300.0     # --stop: for the trial's bag to open
 
 
 def children_cpu_s() -> float:
@@ -39,8 +44,8 @@ def children_cpu_s() -> float:
 
 
 def trial_command(scene: str, layout: str, out: Path, rtf: float = 1.0) -> list:
-    return [sys.executable, '-m', 'mantis_rig.cli', 'trial', '--backend', 'sim', '--scene', scene,
-            '--out', str(out), '--processes', layout, '--real-time-factor', str(rtf)]
+    return mantis_argv('trial', '--backend', 'sim', '--scene', scene, '--out', out,
+                       '--processes', layout, '--real-time-factor', rtf)
 
 
 def measure_trial(scene: str, layout: str, rtf: float = 1.0, checkout: Path = REPO):
@@ -94,19 +99,14 @@ def paired_against(rev: str, scene: str, pairs: int) -> None:
 
 
 def time_the_stop(scene: str, layout: str) -> None:
-    with tempfile.TemporaryDirectory() as out:
-        process = subprocess.Popen(trial_command(scene, layout, Path(out)), cwd=REPO,
-                                   stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                                   start_new_session=True)
-        for line in process.stdout:
-            if line.startswith('bag: '):
-                break
+    with tempfile.TemporaryDirectory() as out, \
+            SessionCommand(trial_command(scene, layout, Path(out))) as trial:
+        trial.wait_for_line(lambda line: line.startswith('bag: '), TRIAL_START_WAIT_S)
         time.sleep(3.0)
-        sent = time.perf_counter()
-        os.killpg(process.pid, signal.SIGINT)
-        status = process.wait()
+        sent = trial.signal_group(signal.SIGINT)
+        status = trial.wait()
         print(f'{layout:6s}: SIGINT 3 s into the trial: exit {status} after '
-              f'{time.perf_counter() - sent:.2f} s')
+              f'{time.monotonic() - sent:.2f} s')
 
 
 def main() -> None:

@@ -21,20 +21,19 @@ import os
 from pathlib import Path
 import shutil
 import signal
-import subprocess
-import sys
 import tempfile
 import threading
 import time
 
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import JointState
+from session_command import SessionCommand, mantis_argv
 
 from mantis_rig import contract
 from mantis_rig.nodes.trial_client import TrialClient
+from mantis_rig.runtime.process_state import cmdline, running
 from mantis_rig.stack.node_table import PROCESS_MODULES
 
-REPO = Path(__file__).resolve().parents[1]
 SCENE = 'air_23mm_rig'
 TRAVEL_MM = 8.0
 INTO_PHASE_S = {'taking_up_slack': 0.15, 'pulling': 0.4, 'returning': 0.2}
@@ -132,7 +131,7 @@ class Observer:
         self.client.destroy_node()
 
 
-class Bringup:
+class Bringup(SessionCommand):
     """`mantis bringup` in a session of its own, its output collected."""
 
     def __init__(self, layout: str, out: Path, extra=(), hardware=None):
@@ -140,93 +139,25 @@ class Bringup:
         common = ['--out', str(out), '--log-dir', str(out / 'logs'), *extra]
         if hardware is not None:
             from hardware_rig import START_MM
-            command = hardware.command(['bringup', '--backend', 'hardware', '--processes',
-                                        'multi', '--set', f'start_position_mm={START_MM}',
-                                        *common])
-            env = hardware.env()
+            super().__init__(hardware.command(['bringup', '--backend', 'hardware',
+                                               '--processes', 'multi', '--set',
+                                               f'start_position_mm={START_MM}', *common]),
+                             env=hardware.env())
         else:
-            command = [sys.executable, '-m', 'mantis_rig.cli', 'bringup', '--backend', 'sim',
-                       '--scene', SCENE, '--processes', layout, *common]
-            env = None
-        self.process = subprocess.Popen(
-            command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-            start_new_session=True, env=env)
-        self.stderr: list[str] = []
-        self.stdout: list[str] = []
-        self.tree: set[int] = set()
-        self._readers = [threading.Thread(target=self._read, args=(s, lines), daemon=True)
-                         for s, lines in ((self.process.stdout, self.stdout),
-                                          (self.process.stderr, self.stderr))]
-        for reader in self._readers:
-            reader.start()
-
-    def _read(self, stream, lines) -> None:
-        for line in stream:
-            lines.append(line.rstrip('\n'))
+            super().__init__(mantis_argv('bringup', '--backend', 'sim', '--scene', SCENE,
+                                         '--processes', layout, *common))
 
     def pid_of(self, name: str) -> int:
         if name == 'mantis':
-            return self.process.pid
-        for pid in children(self.process.pid):
+            return self.pid
+        for pid in self.children():
             if PROCESS_MODULES[name] in cmdline(pid):
                 return pid
-        raise LookupError(f'no {name} process under {self.process.pid}')
-
-    def note_tree(self) -> None:
-        self.tree |= set(children(self.process.pid))
+        raise LookupError(f'no {name} process under {self.pid}')
 
     def line(self) -> str:
         ours = [line for line in self.stderr if line.startswith('mantis bringup: ')]
         return ours[-1] if ours else ''
-
-    def wait(self, timeout_s: float) -> int | None:
-        try:
-            status = self.process.wait(timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            return None
-        for reader in self._readers:
-            reader.join(timeout=5.0)
-        return status
-
-    def kill(self) -> None:
-        for pid in [self.process.pid, *self.tree]:
-            try:
-                os.kill(pid, signal.SIGCONT)
-                os.kill(pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-        try:
-            self.process.wait(timeout=10.0)
-        except subprocess.TimeoutExpired:
-            pass
-
-
-def children(pid: int) -> list:
-    found = []
-    for entry in Path('/proc').iterdir():
-        if entry.name.isdigit():
-            try:
-                stat = (entry / 'stat').read_text().rsplit(')', 1)[1].split()
-            except (OSError, IndexError):
-                continue
-            if int(stat[1]) == pid:
-                found.append(int(entry.name))
-    return found
-
-
-def cmdline(pid: int) -> str:
-    try:
-        return Path(f'/proc/{pid}/cmdline').read_bytes().replace(b'\0', b' ').decode()
-    except OSError:
-        return ''
-
-
-def running(pid: int) -> bool:
-    try:
-        state = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0]
-    except (OSError, IndexError):
-        return False
-    return state != 'Z'
 
 
 def run_trial_to_end(observer: Observer, timeout_s: float = 240.0) -> str:
@@ -250,7 +181,7 @@ def next_bringup_runs_a_trial(layout: str, out: Path, hardware=None) -> str:
         if final != 'done':
             final = f'{final}: {observer.client.reason}'
         rig.note_tree()
-        rig.process.send_signal(signal.SIGINT)
+        rig.signal(signal.SIGINT)
         status = rig.wait(30.0)
         if status != 130:
             final += f' (the bring-up then exited {status})'
@@ -311,7 +242,7 @@ def run_case(case: Case, work: Path, next_trial: bool = True) -> Result:
             status = rig.wait(FROZEN_HOLD_S + 5.0)
             if status is None:     # resumed: the trial goes on; end the bring-up as a user
                 client.wait_for_end(120.0)
-                rig.process.send_signal(signal.SIGINT)
+                rig.signal(signal.SIGINT)
                 status = rig.wait(30.0)
         else:
             status = rig.wait(EXIT_WAIT_S)

@@ -15,6 +15,8 @@ import threading
 import time
 from typing import Optional
 
+from mantis_rig.runtime.process_state import state_of
+
 SIGNAL_NAMES = {signal.SIGINT: 'SIGINT (Ctrl-C)', signal.SIGTERM: 'SIGTERM'}
 # How a node process that stops its stage on a signal says so in the error of the move it cut
 # short: the supervisor's abort reason then shows the process is on its way out.
@@ -148,15 +150,6 @@ def watch_parent(parent_pid: int) -> threading.Thread:
     thread = threading.Thread(target=watch, name='parent-watch', daemon=True)
     thread.start()
     return thread
-
-
-def state_of(pid: int) -> str | None:
-    """Process ``pid``'s one-letter state in /proc (``T``: stopped), None if it is gone."""
-    try:
-        with open(f'/proc/{pid}/stat', encoding='ascii', errors='replace') as f:
-            return f.read().rsplit(')', 1)[1].split()[0]
-    except (OSError, IndexError):
-        return None
 
 
 __all__ = ['StopRequested', 'StopSignals', 'say', 'stop_reason', 'watch_parent']

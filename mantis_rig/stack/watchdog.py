@@ -31,7 +31,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 
 from mantis_rig import contract
 from mantis_rig.faults import StackError
-from mantis_rig.runtime.stopping import state_of
+from mantis_rig.runtime.process_state import state_of
 
 WATCH_PERIOD_S = 0.1       # how often the bring-up looks at its node processes
 STOPPED_S = 0.3            # a process seen stopped ('T') this long apart is frozen

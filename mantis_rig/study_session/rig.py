@@ -19,6 +19,7 @@ from typing import Optional
 
 from mantis_rig.faults import StackError
 from mantis_rig.recording import TRIAL_OUTCOME, BagReader
+from mantis_rig.recording.bag_metadata import wait_closed
 from mantis_rig.trial.supervisor_settings import ConditionError
 from mantis_sim.studies.rig_study.plan import CONDITION_KEYS
 from mantis_sim.studies.rig_study.quantities import CONDITION_LABELS
@@ -78,13 +79,10 @@ class ClientRig:
     def _reason(self) -> str:
         """The trial's outcome reason, from its closed bag ('' when it completed)."""
         bag = self.bag
-        deadline = time.monotonic() + BAG_CLOSE_WAIT_S
-        while not (bag / 'metadata.yaml').exists():
-            if time.monotonic() > deadline:
-                raise StackError(f'the trial ended but its log {bag} was not closed within '
-                                 f'{BAG_CLOSE_WAIT_S:g} s')
-            self.alive()
-            time.sleep(0.05)
+        # alive() raises when the stack died; otherwise the wait goes on to its end
+        if not wait_closed(bag, BAG_CLOSE_WAIT_S, failed=lambda: self.alive() or False):
+            raise StackError(f'the trial ended but its log {bag} was not closed within '
+                             f'{BAG_CLOSE_WAIT_S:g} s')
         outcome = BagReader(bag, warn=False).metadata(TRIAL_OUTCOME) or {}
         return outcome.get('reason', '')
 

@@ -14,13 +14,14 @@ condition (a state, a closed bag), none on a fixed time.
 from pathlib import Path
 
 import pytest
-from test_trial import FAST_RETURN, SCENE, TRIAL_TIMEOUT_S, bag_of, wait_closed
+from test_trial import FAST_RETURN, SCENE, TRIAL_TIMEOUT_S, bag_of
 
 from mantis_rig import contract
 from mantis_rig.analysis.inputs.bag import read_trial_bag
 from mantis_rig.nodes.supervisor_node import STATUS_NAME
 from mantis_rig.nodes.trial_client import TrialClient
 from mantis_rig.recording import BagReader
+from mantis_rig.recording.bag_metadata import wait_closed
 from mantis_rig.recording.trial_summary import summarize
 from mantis_rig.stack.bringup import Stack, StackConfig
 
@@ -96,7 +97,7 @@ def test_two_rigs_in_two_namespaces_each_record_only_their_own_trial(ros, tmp_pa
         for namespace, (stack, client) in rigs.items():
             final = client.wait_for_end(TRIAL_TIMEOUT_S, alive=stack.check_processes)
             assert final == 'done', (namespace, client.states)
-            wait_closed(bags[namespace])
+            assert wait_closed(bags[namespace], 30.0), f'{bags[namespace]} was not closed'
     finally:
         for stack, client in rigs.values():
             stack.stop()

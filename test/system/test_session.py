@@ -11,7 +11,6 @@ import csv
 import io
 from pathlib import Path
 import threading
-import time
 
 import pytest
 from rcl_interfaces.msg import Parameter as ParameterMsg
@@ -30,6 +29,7 @@ from mantis_rig.contract import (
     resolve,
 )
 from mantis_rig.nodes.trial_client import TrialClient
+from mantis_rig.recording.bag_metadata import wait_closed
 from mantis_rig.recording.trial_summary import summarize
 from mantis_rig.stack.bringup import Stack, StackConfig
 
@@ -65,15 +65,9 @@ def run_trial(client):
     started, message, final = client.run_trial(timeout_s=TRIAL_TIMEOUT_S)
     assert started, message
     bag = Path(message.rsplit('logging to ', 1)[1])
-    wait_closed(bag)                # closed by then: the end is published once it is
+    # closed by then: the end is published once it is
+    assert wait_closed(bag, 30.0), f'{bag} was not closed'
     return final, summarize(bag).outcome['reason'], bag
-
-
-def wait_closed(bag, timeout_s=30.0):
-    deadline = time.monotonic() + timeout_s
-    while not (bag / 'metadata.yaml').exists():
-        assert time.monotonic() < deadline, f'{bag} was not closed'
-        time.sleep(0.05)
 
 
 def set_supervisor(client, name, value):
@@ -139,7 +133,7 @@ def test_one_bring_up_many_trials_with_aborts_between(ros, tmp_path):
         assert client.call('abort')[0]
         assert client.wait_for_end(TRIAL_TIMEOUT_S) == 'aborted'
         bag = Path(message.rsplit('logging to ', 1)[1])
-        wait_closed(bag)
+        assert wait_closed(bag, 30.0), f'{bag} was not closed'
         assert 'abort requested' in summarize(bag).outcome['reason']
         trial_done()
     # every strike re-latched the robot: one latch more per strike that happened

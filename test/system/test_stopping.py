@@ -14,13 +14,11 @@ from pathlib import Path
 import re
 import resource
 import signal
-import subprocess
-import sys
-import threading
 import time
 
 import pytest
 import rclpy
+from session_command import SessionCommand, mantis_argv
 
 from mantis_rig.contract import (
     JOINT_STATE,
@@ -34,9 +32,9 @@ from mantis_rig.faults import RIG_FAULT
 from mantis_rig.nodes.trial_client import TrialClient
 from mantis_rig.recording import BagReader, TruncatedBagWarning
 from mantis_rig.recording import writer as writer_module
+from mantis_rig.runtime.process_state import cmdline, running
 from mantis_rig.stack.bringup import Stack, StackConfig
 
-REPO = Path(__file__).resolve().parents[2]
 EXIT_BOUND_S = 8.0
 INTO_TRIAL_S = 3.0          # wall seconds after the bag is opened: homing, slack or pulling
 STAGE_STOPS_WITHIN_S = 0.1  # rig time
@@ -44,29 +42,13 @@ STAGE_STOPS_WITHIN_S = 0.1  # rig time
 pytestmark = [pytest.mark.timeout(300), pytest.mark.slow, pytest.mark.ros]
 
 
-class TrialProcess:
+class TrialProcess(SessionCommand):
     """`mantis trial` in a session of its own, its output collected as it comes."""
 
     def __init__(self, tmp_path, processes='single', extra=(), preexec_fn=None):
-        self.process = subprocess.Popen(
-            [sys.executable, '-m', 'mantis_rig.cli', 'trial', '--backend', 'sim',
-             '--scene', 'reference_air_23mm', '--out', str(tmp_path), '--processes', processes,
-             '--log-dir', str(tmp_path / 'logs'), *extra],
-            cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-            start_new_session=True, preexec_fn=preexec_fn)
-        self.stdout, self.stderr = [], []
-        self._bag_seen = threading.Event()
-        self._readers = [threading.Thread(target=self._read, args=(stream, lines), daemon=True)
-                         for stream, lines in ((self.process.stdout, self.stdout),
-                                               (self.process.stderr, self.stderr))]
-        for reader in self._readers:
-            reader.start()
-
-    def _read(self, stream, lines) -> None:
-        for line in stream:
-            lines.append(line.rstrip('\n'))
-            if line.startswith('bag: '):
-                self._bag_seen.set()
+        super().__init__(mantis_argv('trial', '--backend', 'sim', '--scene', 'reference_air_23mm',
+                                     '--out', tmp_path, '--processes', processes, '--log-dir',
+                                     tmp_path / 'logs', *extra), preexec_fn=preexec_fn)
 
     @property
     def bag(self) -> Path:
@@ -74,52 +56,14 @@ class TrialProcess:
         return Path(line.removeprefix('bag: '))
 
     def wait_into_trial(self) -> None:
-        assert self._bag_seen.wait(90.0), 'no trial started:\n' + '\n'.join(self.stderr)
+        assert self.wait_for_line(lambda line: line.startswith('bag: '), 90.0) is not None, \
+            'no trial started:\n' + '\n'.join(self.stderr)
         time.sleep(INTO_TRIAL_S)
         assert self.process.poll() is None, 'the trial ended before it was interrupted'
 
     def wait_for_stderr(self, text: str, timeout_s: float = 30.0) -> None:
-        deadline = time.monotonic() + timeout_s
-        while not any(text in line for line in self.stderr):
-            assert time.monotonic() < deadline, f'no {text!r} on stderr'
-            time.sleep(0.005)
-
-    def children(self) -> list:
-        return [int(p.name) for p in Path('/proc').iterdir() if p.name.isdigit()
-                and _parent_of(int(p.name)) == self.process.pid]
-
-    def signal(self, signum, group=True) -> float:
-        if group:
-            os.killpg(self.process.pid, signum)
-        else:
-            self.process.send_signal(signum)
-        return time.monotonic()
-
-    def wait(self, timeout_s=60.0) -> int:
-        status = self.process.wait(timeout=timeout_s)
-        for reader in self._readers:
-            reader.join(timeout=5.0)
-        return status
-
-    def kill(self) -> None:
-        if self.process.poll() is None:
-            os.killpg(self.process.pid, signal.SIGKILL)
-            self.process.wait()
-
-
-def _parent_of(pid: int):
-    try:
-        return int(Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[1])
-    except (OSError, IndexError, ValueError):
-        return None
-
-
-def running(pid: int) -> bool:
-    try:
-        state = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != 'Z'
+        assert self.wait_for_line(text, timeout_s, stream='stderr') is not None, \
+            f'no {text!r} on stderr'
 
 
 @pytest.fixture
@@ -177,8 +121,8 @@ def test_a_signal_stops_the_stage_closes_the_log_and_ends_everything(trial, proc
     run.wait_into_trial()
     children = run.children()
     assert len(children) == (2 if processes == 'multi' else 0)    # the rig, the supervisor
-    sent_at = run.signal(signum, group=group)
-    status = run.wait()
+    sent_at = run.signal_group(signum) if group else run.signal(signum)
+    status = run.wait(60.0)
     check_exit(run, status, sent_at, signum)
     name = 'SIGINT (Ctrl-C)' if signum == signal.SIGINT else 'SIGTERM'
     check_stopped_bag(run.bag, f'interrupted by {name}')
@@ -189,10 +133,10 @@ def test_a_signal_stops_the_stage_closes_the_log_and_ends_everything(trial, proc
 def test_a_second_ctrl_c_stops_the_stage_and_exits_at_once(trial):
     run = trial('single')
     run.wait_into_trial()
-    run.signal(signal.SIGINT)
+    run.signal_group(signal.SIGINT)
     run.wait_for_stderr('[supervisor_node]: aborting trial 1: interrupted by SIGINT')
-    sent_at = run.signal(signal.SIGINT)      # inside the orderly stop
-    status = run.wait()
+    sent_at = run.signal_group(signal.SIGINT)      # inside the orderly stop
+    status = run.wait(60.0)
     assert status == 130
     assert time.monotonic() - sent_at < EXIT_BOUND_S
     stderr = '\n'.join(run.stderr)
@@ -206,7 +150,7 @@ def test_a_node_process_killed_by_its_own_signal_aborts_the_trial(trial):
     run.wait_into_trial()
     children = run.children()
     rig = next(pid for pid in children
-               if 'mantis_rig.simulated.sim_rig' in Path(f'/proc/{pid}/cmdline').read_text())
+               if 'mantis_rig.simulated.sim_rig' in cmdline(pid))
     os.kill(rig, signal.SIGTERM)
     status = run.wait(timeout_s=60.0)
     stderr = '\n'.join(run.stderr)

@@ -7,13 +7,11 @@ import os
 from pathlib import Path
 import random
 import signal
-import subprocess
-import sys
-import threading
 import time
 
 import numpy as np
 import pytest
+from session_command import mantis
 
 from mantis_rig.contract import DIAGNOSTICS, resolve
 from mantis_rig.recording import TRIAL_OUTCOME, BagReader
@@ -22,7 +20,6 @@ from mantis_sim.results import simulate
 from mantis_sim.scene import load_scene
 from mantis_sim.studies.rig_study.quantities import QUANTITIES
 
-REPO = Path(__file__).resolve().parents[2]
 BINDING_PLAN = """scene: air_23mm_rig
 factors:
   d_t_mm: [19, 25]
@@ -33,59 +30,6 @@ seed: 5
 """
 
 pytestmark = [pytest.mark.timeout(1500), pytest.mark.slow, pytest.mark.ros]
-
-
-class Command:
-    """A `mantis` command in a session of its own, its output collected as it comes."""
-
-    def __init__(self, *args, stdin=None):
-        self.process = subprocess.Popen(
-            [sys.executable, '-m', 'mantis_rig.cli', *map(str, args)], cwd=REPO,
-            stdin=subprocess.PIPE if stdin is not None else subprocess.DEVNULL,
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
-        self.lines = []
-        self._readers = [threading.Thread(target=self._read, args=(s,), daemon=True)
-                         for s in (self.process.stdout, self.process.stderr)]
-        for reader in self._readers:
-            reader.start()
-
-    def _read(self, stream) -> None:
-        for line in stream:
-            self.lines.append(line.rstrip('\n'))
-
-    def wait(self, timeout_s: float) -> int:
-        try:
-            status = self.process.wait(timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            os.killpg(self.process.pid, signal.SIGKILL)
-            raise AssertionError('timed out:\n' + '\n'.join(self.lines[-40:])) from None
-        for reader in self._readers:
-            reader.join(5.0)
-        return status
-
-    def kill(self) -> None:
-        if self.process.poll() is None:
-            os.killpg(self.process.pid, signal.SIGKILL)
-            self.process.wait()
-
-    def text(self) -> str:
-        return '\n'.join(self.lines)
-
-
-def left_running(session: int) -> list:
-    """The processes still running in a command's session (it started one of its own). An
-    exited process whose parent had already gone (multiprocessing's resource tracker) waits
-    as a zombie for this sandbox's PID 1 to reap it: it no longer runs, and is not counted."""
-    left = []
-    for entry in Path('/proc').iterdir():
-        if entry.name.isdigit():
-            try:
-                state = (entry / 'stat').read_text().rsplit(')', 1)[1].split()[0]
-                if os.getsid(int(entry.name)) == session and state != 'Z':
-                    left.append(int(entry.name))
-            except (OSError, IndexError):
-                continue
-    return left
 
 
 def _statuses(directory: Path) -> list:
@@ -137,8 +81,7 @@ def test_the_issues_plan_stopped_with_ctrl_c_and_run_again(tmp_path):
     out = tmp_path / 'study'
     command = ('study', plan, '--out', out, '--real-time-factor', '0')
     stop_after = random.Random(os.getpid()).randint(1, 12)     # trials done before the stop
-    first = Command(*command)
-    try:
+    with mantis(*command) as first:
         deadline = time.monotonic() + 600
         while True:
             statuses = _statuses(out)
@@ -147,23 +90,18 @@ def test_the_issues_plan_stopped_with_ctrl_c_and_run_again(tmp_path):
             assert first.process.poll() is None, first.text()
             assert time.monotonic() < deadline, first.text()
             time.sleep(0.05)
-        os.killpg(first.process.pid, signal.SIGINT)           # as a terminal's Ctrl-C
-        assert first.wait(60) == 130, first.text()
-    finally:
-        first.kill()
-    assert 'Traceback' not in first.text()
-    assert left_running(first.process.pid) == []          # nodes, analyst: all ended
+        first.signal_group(signal.SIGINT)                      # as a terminal's Ctrl-C
+        assert first.finish(60) == 130, first.text()
+        assert 'Traceback' not in first.text()
+        assert first.left_running() == []                      # nodes, analyst: all ended
     assert any('interrupted by SIGINT' in line and 'run the same command again' in line
                for line in first.lines), first.text()
     rows = read_record(out / 'study.csv').rows
     assert [r['status'] for r in rows].count('interrupted') == 1
-    second = Command(*command)
-    try:
-        assert second.wait(900) == 0, second.text()
-    finally:
-        second.kill()
-    assert 'resuming the study' in second.text()
-    assert left_running(second.process.pid) == []
+    with mantis(*command) as second:
+        assert second.finish(900) == 0, second.text()
+        assert 'resuming the study' in second.text()
+        assert second.left_running() == []
     rows = read_record(out / 'study.csv').rows
     done = [r for r in rows if r['status'] == 'done']
     assert len(done) == 16 and sorted(r['trial'] for r in done) == list(range(1, 17))
@@ -195,20 +133,17 @@ def test_a_study_with_the_rig_in_processes_of_its_own_and_an_abort(tmp_path):
                     'order: split-plot\nseed: 1\nrobots: 40\n')
     out = tmp_path / 'study'
     # in rig time (a trial lasts seconds): the abort, a process of its own, lands in the first
-    command = Command('study', plan, '--out', out, '--real-time-factor', '1', '--processes',
-                      'multi', '--log-dir', tmp_path / 'logs')
-    try:
+    with mantis('study', plan, '--out', out, '--real-time-factor', '1', '--processes',
+                'multi', '--log-dir', tmp_path / 'logs') as command:
         deadline = time.monotonic() + 300
         while 'running' not in _statuses(out):
             assert command.process.poll() is None and time.monotonic() < deadline, \
                 command.text()
             time.sleep(0.02)
-        abort = Command('abort')
-        assert abort.wait(60) == 0, abort.text()
-        assert command.wait(600) == 0, command.text()
-    finally:
-        command.kill()
-    assert left_running(command.process.pid) == []
+        with mantis('abort') as abort:
+            assert abort.finish(60) == 0, abort.text()
+        assert command.finish(600) == 0, command.text()
+        assert command.left_running() == []
     rows = read_record(out / 'study.csv').rows
     by_operator = [r for r in rows if r['status'] == 'aborted'
                    and 'abort requested' in r['reason']]
@@ -229,31 +164,17 @@ def test_a_study_on_a_running_rig_asks_the_person(tmp_path):
     plan = tmp_path / 'plan.yaml'
     plan.write_text('scene: air_23mm_rig\nfactors: {d_t_mm: [19, 25]}\nrepeats: 1\n'
                     'order: as-listed\nseed: 1\nrobots: 40\n')
-    rig = Command('bringup', '--backend', 'sim', '--real-time-factor', '0', '--namespace',
-                  '/rig2', '--out', tmp_path / 'unused')
-    study = None
-    try:
-        deadline = time.monotonic() + 120
-        while not any('up (' in line for line in rig.lines):
-            assert rig.process.poll() is None and time.monotonic() < deadline, rig.text()
-            time.sleep(0.1)
-        study = Command('study', plan, '--out', tmp_path / 'study', '--connect', '--namespace',
-                        '/rig2', '--ask', stdin=True)
-        for _ in range(2):                  # a prompt before each trial, Enter to each
-            deadline = time.monotonic() + 300
-            prompts = lambda: sum('press Enter' in line for line in study.lines)  # noqa: E731
-            asked = prompts()
-            while prompts() == asked:
-                assert study.process.poll() is None, study.text()
-                assert time.monotonic() < deadline, study.text()
-                time.sleep(0.1)
-            study.process.stdin.write('\n')
-            study.process.stdin.flush()
-        assert study.wait(300) == 0, study.text()
-    finally:
-        if study is not None:
-            study.kill()
-        rig.kill()
+    with mantis('bringup', '--backend', 'sim', '--real-time-factor', '0', '--namespace',
+                '/rig2', '--out', tmp_path / 'unused') as rig:
+        assert rig.wait_for_line('up (', 120, stream='any') is not None, rig.text()
+        with mantis('study', plan, '--out', tmp_path / 'study', '--connect', '--namespace',
+                    '/rig2', '--ask', stdin=True) as study:
+            for _ in range(2):                  # a prompt before each trial, Enter to each
+                asked = study.wait_for_line('press Enter', 300, stream='any',
+                                            start=len(study.lines))
+                assert asked is not None, study.text()
+                study.write('\n')
+            assert study.finish(300) == 0, study.text()
     prompts = [line for line in study.lines if 'press Enter' in line]
     assert 'set the guide distance to 19 mm' in prompts[0]
     assert 'set the guide distance to 25 mm (was 19 mm)' in prompts[1]

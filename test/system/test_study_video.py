@@ -6,7 +6,7 @@ simulated camera records them) within 2 %."""
 from pathlib import Path
 
 import pytest
-from test_study import Command, left_running
+from session_command import mantis
 
 from mantis_rig.contract import FILM_FOLDER
 from mantis_rig.recording import TRIAL_OUTCOME, BagReader
@@ -35,13 +35,10 @@ def test_a_simulated_study_with_video_tracks_every_trial_s_film(tmp_path):
     plan = tmp_path / 'plan.yaml'
     plan.write_text(PLAN)
     out = tmp_path / 'study'
-    command = Command('study', plan, '--out', out, '--real-time-factor', '0', *WINDOW)
-    try:
-        assert command.wait(600) == 0, command.text()
-    finally:
-        command.kill()
-    assert 'Traceback' not in command.text()
-    assert left_running(command.process.pid) == []
+    with mantis('study', plan, '--out', out, '--real-time-factor', '0', *WINDOW) as command:
+        assert command.finish(600) == 0, command.text()
+        assert 'Traceback' not in command.text()
+        assert command.left_running() == []
     rows = read_record(out / 'study.csv').rows
     assert [r['status'] for r in rows] == ['done', 'done'], rows
     agreement = []

@@ -46,6 +46,7 @@ from mantis_rig.contract import (
 from mantis_rig.nodes.recorder import TRIAL_TOPICS
 from mantis_rig.nodes.trial_client import TrialClient
 from mantis_rig.recording import BagReader, TruncatedBagWarning, recover_bag
+from mantis_rig.recording.bag_metadata import wait_closed
 from mantis_rig.recording.marker_block import concatenate, marker_block_from_msg
 from mantis_rig.recording.trial_summary import summarize
 from mantis_rig.stack.bringup import Stack, StackConfig
@@ -97,13 +98,6 @@ def set_parameter(client, name, value):
 def bag_of(message):
     assert message.startswith('trial started; logging to '), message
     return Path(message.rsplit('logging to ', 1)[1])
-
-
-def wait_closed(bag, timeout=30.0):
-    deadline = time.monotonic() + timeout
-    while not (bag / 'metadata.yaml').exists():
-        assert time.monotonic() < deadline, f'{bag} was not closed'
-        time.sleep(0.05)
 
 
 # ----------------------------------------------------------------------------- checks
@@ -187,7 +181,7 @@ def test_air_23mm_trial_in_one_process(ros, tmp_path):
         ok, reason = set_parameter(client, FORCE_CEILING_NAME, 20.0)
         assert not ok and 'a trial is in progress' in reason, reason
         wait_for(client, 'done', mark)
-        wait_closed(bag)
+        assert wait_closed(bag, 30.0), f'{bag} was not closed'
         peak_time_s = stack.node(SIM_WORLD_NODE).world.last_strike.peak_time_s
         # it struck: once its log is closed the supervisor waits for the robot's re-latch
         assert client.wait_for_state(('waiting_for_relatch',), mark, 30.0)
@@ -248,7 +242,7 @@ def test_force_ceiling_below_the_peak_aborts(ros, tmp_path):
         assert started, message
         assert final == 'aborted'
         bag = bag_of(message)
-        wait_closed(bag)
+        assert wait_closed(bag, 30.0), f'{bag} was not closed'
         time.sleep(0.5)                     # let the stage report standing still
         stage = stack.node(SIM_WORLD_NODE).world.stage_velocity_m_per_s()
     finally:

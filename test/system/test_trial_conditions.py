@@ -12,7 +12,6 @@ import io
 import json
 from pathlib import Path
 import threading
-import time
 
 import polling
 import pytest
@@ -33,6 +32,7 @@ from mantis_rig.contract import (
 )
 from mantis_rig.nodes.trial_client import TrialClient
 from mantis_rig.recording import BagReader
+from mantis_rig.recording.bag_metadata import wait_closed
 from mantis_rig.recording.trial_summary import summarize
 from mantis_rig.stack.bringup import Stack, StackConfig
 from mantis_sim.results import simulate
@@ -68,17 +68,14 @@ def session(tmp_path, seed=3, processes='single'):
 def run_trial(client):
     started, message, final = client.run_trial(timeout_s=TRIAL_TIMEOUT_S)
     assert started, message
-    bag = wait_closed(message)
+    bag = closed_bag(message)
     return final, summarize(bag).outcome['reason'], bag
 
 
-def wait_closed(message, timeout_s=30.0) -> Path:
+def closed_bag(message, timeout_s=30.0) -> Path:
     """The bag a start's answer names, once closed (the final state comes before that)."""
     bag = Path(message.rsplit('logging to ', 1)[1])
-    deadline = time.monotonic() + timeout_s
-    while not (bag / 'metadata.yaml').exists():
-        assert time.monotonic() < deadline, f'{bag} was not closed'
-        time.sleep(0.05)
+    assert wait_closed(bag, timeout_s), f'{bag} was not closed'
     return bag
 
 
@@ -202,7 +199,7 @@ def test_conditions_the_world_cannot_apply_end_the_trial_with_the_reason(ros, tm
                                          'moved since it was latched'), refused.reason
         assert same.successful
         assert client.wait_for_end(TRIAL_TIMEOUT_S) == 'done'
-        bag = wait_closed(message)
+        bag = closed_bag(message)
         assert world.last_strike is not None and world.strikes == 2
     robot = robot_that_struck(bag)
     assert (float(robot['contact_angle_deg']), float(robot['d_t_mm'])) == (5.0, 23.0)

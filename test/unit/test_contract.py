@@ -49,8 +49,7 @@ NOT_ROS_NAMES = {
     ('mantis_rig/hardware/nidaq.py', '/line'): 'part of a DAQ line name, Dev1/port0/line0',
     ('mantis_rig/recording/message_types.py', '/msg/'): 'part of a message type, pkg/msg/Type',
     ('mantis_rig/analysis/intervals.py', 'm/s'): 'a unit, metres per second',
-    ('mantis_rig/runtime/stopping.py', '/proc/'): 'a path, /proc/<pid>/stat',
-    ('mantis_rig/runtime/stopping.py', '/stat'): 'a path, /proc/<pid>/stat',
+    ('mantis_rig/runtime/process_state.py', '/proc'): 'a path, /proc',
 }
 
 
