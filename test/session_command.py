@@ -26,6 +26,9 @@ from mantis_rig.runtime import process_state
 
 REPO = Path(__file__).resolve().parents[1]
 STREAMS = ('stdout', 'stderr')
+#: how long after a command has exited the helpers multiprocessing started for it may take to
+#: end on their own (left_running's settle_s)
+SETTLE_S = 5.0
 
 
 def mantis_argv(*args) -> list:
@@ -152,10 +155,25 @@ class SessionCommand:
         """Note its children now in ``tree`` (they outlive it in /proc's eyes: re-parented)."""
         self.tree |= set(self.children())
 
-    def left_running(self) -> list[int]:
+    def left_running(self, settle_s: float = 0.0) -> list[int]:
         """The processes of its session that still run (zombies, which no longer run, not
-        counted: an exited process whose parent had gone waits for PID 1 to reap it)."""
-        return process_state.in_session(self.pid)
+        counted: an exited process whose parent had gone waits for PID 1 to reap it). With
+        ``settle_s``, those still running that long after: a helper multiprocessing started
+        for the command (its resource tracker, a forkserver) ends on its own once the command
+        has exited and closed its end of their pipe, a moment later."""
+        deadline = time.monotonic() + settle_s
+        while True:
+            running = process_state.in_session(self.pid)
+            if not running or time.monotonic() >= deadline:
+                return running
+            time.sleep(0.02)
+
+    def assert_nothing_left(self, settle_s: float = SETTLE_S) -> None:
+        """Fail, naming each process and its command line, if any of its session still runs
+        ``settle_s`` after it exited."""
+        left = self.left_running(settle_s)
+        assert not left, 'left running: ' + '; '.join(
+            f'{pid} {process_state.cmdline(pid)[:120]}' for pid in left)
 
     def kill(self) -> None:
         """SIGCONT and SIGKILL to every process of its session (a stopped one too), then

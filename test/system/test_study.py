@@ -93,7 +93,7 @@ def test_the_issues_plan_stopped_with_ctrl_c_and_run_again(tmp_path):
         first.signal_group(signal.SIGINT)                      # as a terminal's Ctrl-C
         assert first.finish(60) == 130, first.text()
         assert 'Traceback' not in first.text()
-        assert first.left_running() == []                      # nodes, analyst: all ended
+        first.assert_nothing_left()     # nodes, analyst: all ended
     assert any('interrupted by SIGINT' in line and 'run the same command again' in line
                for line in first.lines), first.text()
     rows = read_record(out / 'study.csv').rows
@@ -101,7 +101,7 @@ def test_the_issues_plan_stopped_with_ctrl_c_and_run_again(tmp_path):
     with mantis(*command) as second:
         assert second.finish(900) == 0, second.text()
         assert 'resuming the study' in second.text()
-        assert second.left_running() == []
+        second.assert_nothing_left()
     rows = read_record(out / 'study.csv').rows
     done = [r for r in rows if r['status'] == 'done']
     assert len(done) == 16 and sorted(r['trial'] for r in done) == list(range(1, 17))
@@ -143,7 +143,7 @@ def test_a_study_with_the_rig_in_processes_of_its_own_and_an_abort(tmp_path):
         with mantis('abort') as abort:
             assert abort.finish(60) == 0, abort.text()
         assert command.finish(600) == 0, command.text()
-        assert command.left_running() == []
+        command.assert_nothing_left()
     rows = read_record(out / 'study.csv').rows
     by_operator = [r for r in rows if r['status'] == 'aborted'
                    and 'abort requested' in r['reason']]

@@ -38,7 +38,7 @@ def test_a_simulated_study_with_video_tracks_every_trial_s_film(tmp_path):
     with mantis('study', plan, '--out', out, '--real-time-factor', '0', *WINDOW) as command:
         assert command.finish(600) == 0, command.text()
         assert 'Traceback' not in command.text()
-        assert command.left_running() == []
+        command.assert_nothing_left()
     rows = read_record(out / 'study.csv').rows
     assert [r['status'] for r in rows] == ['done', 'done'], rows
     agreement = []
