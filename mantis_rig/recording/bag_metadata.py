@@ -6,6 +6,7 @@ import time
 
 import yaml
 
+from mantis_sim.durable_files import fsync_dir, write_atomically  # noqa: F401 - the writer's
 from mantis_sim.errors import InputError
 
 from .yaml_emit import emit_yaml
@@ -94,28 +95,7 @@ def write_metadata_yaml(bag_dir, summary):
     """Write <bag_dir>/metadata.yaml atomically (temp file, fsync, rename)."""
     path = Path(bag_dir) / METADATA_FILENAME
     text = emit_yaml({'rosbag2_bagfile_information': bag_metadata_dict(summary)})
-    temp = path.with_name(METADATA_FILENAME + '.tmp')
-    with open(temp, 'w', encoding='utf-8') as stream:
-        stream.write(text)
-        stream.flush()
-        os.fsync(stream.fileno())
-    os.replace(temp, path)
-    fsync_dir(path.parent)
-    return path
-
-
-def fsync_dir(directory):
-    """fsync a directory so that new entries in it survive a crash (best effort)."""
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
+    return write_atomically(path, text, temp_name=METADATA_FILENAME + '.tmp')
 
 
 class MetadataFileError(InputError):

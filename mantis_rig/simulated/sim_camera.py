@@ -34,6 +34,7 @@ from mantis_rig.hardware.device_interfaces import (
     check_camera_config,
 )
 from mantis_rig.simulated.world_port import WorldPort
+from mantis_sim.durable_files import fsync_dir
 from mantis_sim.scene import Scene
 from mantis_sim.sensors import CameraSensor
 
@@ -174,7 +175,7 @@ class SimCameraTrigger(CameraTrigger):
                           take.last_s + half, setup, video_format, progress=progress)
             _sync_tree(tmp)
             os.replace(tmp, out_dir)
-            _sync_dir(out_dir.parent)
+            fsync_dir(out_dir.parent)
         except (OSError, ValueError, RuntimeError) as exc:
             shutil.rmtree(tmp, ignore_errors=True)
             raise FilmError(f'filming into {out_dir}: {exc}') from exc
@@ -192,15 +193,5 @@ def _sync_tree(folder: Path) -> None:
         if path.is_file():
             with open(path, 'rb') as handle:
                 os.fsync(handle.fileno())
-    _sync_dir(folder)
+    fsync_dir(folder)
 
-
-def _sync_dir(folder: Path) -> None:
-    try:
-        fd = os.open(folder, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)

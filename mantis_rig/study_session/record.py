@@ -14,9 +14,9 @@ import csv
 from dataclasses import dataclass
 import io
 import math
-import os
 from pathlib import Path
 
+from mantis_sim.durable_files import write_atomically
 from mantis_sim.errors import InputError
 from mantis_sim.studies.rig_study.judge import forecast_columns
 from mantis_sim.studies.rig_study.plan import CONDITION_KEYS
@@ -103,22 +103,6 @@ def repeat_of(row: dict) -> dict:
                    {k: row[k] for k in CONDITION_KEYS if row.get(k) is not None})
 
 
-def write_atomically(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` so that a crash leaves the old file or the new one whole."""
-    tmp = path.with_name(f'.{path.name}.tmp')
-    with open(tmp, 'w', encoding='utf-8') as handle:
-        handle.write(text)
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(tmp, path)
-    try:
-        fd = os.open(path.parent, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
 
 
 def _cell(value) -> str:

@@ -16,7 +16,6 @@ from concurrent.futures import Future
 from dataclasses import dataclass
 from datetime import UTC, datetime
 import math
-import os
 from pathlib import Path
 import pickle
 from typing import Optional, Protocol
@@ -490,11 +489,7 @@ def load_ensembles(directory: Path) -> dict:
 
 
 def save_ensembles(directory: Path, ensembles: list) -> None:
-    path = directory / ENSEMBLES
-    tmp = path.with_name(f'.{path.name}.tmp')
-    with open(tmp, 'wb') as handle:
-        pickle.dump(list(ensembles), handle)
-    os.replace(tmp, path)
+    write_atomically(directory / ENSEMBLES, pickle.dumps(list(ensembles)))
 
 
 def study_forecaster(directory: Path, plan: StudyPlan, rows: list, scene_overrides=(),
