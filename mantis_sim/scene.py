@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterable
+import copy
 from dataclasses import dataclass, field, replace
 from importlib import resources
 import os
@@ -226,9 +227,34 @@ def _yaml_problem(exc: yaml.YAMLError) -> str:
     return text
 
 
+#: parsed scene files: (path, mtime_ns, size) -> the YAML's data. A simulated trial reads its
+#: scene several times in one process (the command line, the world, the device nodes), and
+#: PyYAML's pure-Python parser takes some 25 ms a time for air_23mm.yaml.
+_PARSED: dict = {}
+_PARSED_KEPT = 32           # a study reads many scenes: the latest few are kept
+
+
+def _parse_yaml_file(path: Path):
+    """yaml.safe_load of the file's text, parsed once per version of the file (its path,
+    modification time and size); each caller gets a deep copy of its own to change."""
+    try:
+        stat = os.stat(path)
+        key = (str(Path(path).resolve()), stat.st_mtime_ns, stat.st_size)
+    except OSError:             # read_text says why
+        key = None
+    if key is not None and key in _PARSED:
+        return copy.deepcopy(_PARSED[key])
+    data = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
+    if key is not None:
+        if len(_PARSED) >= _PARSED_KEPT:
+            _PARSED.clear()
+        _PARSED[key] = copy.deepcopy(data)
+    return data
+
+
 def load_scene_file(path: Path) -> Scene:
     try:
-        data = yaml.safe_load(Path(path).read_text(encoding='utf-8'))
+        data = _parse_yaml_file(path)
     except UnicodeDecodeError as exc:
         raise SceneError(f'{path}: not UTF-8 text (byte {exc.start}: '
                          f'{exc.object[exc.start:exc.start + 1]!r})') from None

@@ -233,6 +233,10 @@ class World:
     def tendon_force_N(self, times_s) -> np.ndarray:
         """True tendon tension at each time (within the kept history, not past time_s)."""
         times_ms = self._check_times(times_s)
+        last = self._strikes[-1]
+        if times_ms.size and times_ms.min() > last.t0_ms:
+            # all in the current latching (the load cell's stream, block after block)
+            return last.tendon_force_N(times_ms)
         forces = np.empty(times_ms.size)
         for strike, at in self._by_strike(times_ms):
             forces[at] = strike.tendon_force_N(times_ms[at])
@@ -274,12 +278,14 @@ class World:
             return times_ms
         earliest = self._strikes[0].earliest_ms()
         latest = self._t_ms
-        if times_ms.min() < earliest - 1e-9 or times_ms.max() > latest + 1e-9:
+        low, high = float(times_ms.min()), float(times_ms.max())
+        if low < earliest - 1e-9 or high > latest + 1e-9:
             raise SimulationError(
-                f'asked for the world at {times_ms.min() * 1e-3:.6f}..'
-                f'{times_ms.max() * 1e-3:.6f} s; it holds {earliest * 1e-3:.6f}..'
-                f'{latest * 1e-3:.6f} s (history {self.history_s} s)')
-        return np.clip(times_ms, earliest, latest)
+                f'asked for the world at {low * 1e-3:.6f}..{high * 1e-3:.6f} s; it holds '
+                f'{earliest * 1e-3:.6f}..{latest * 1e-3:.6f} s (history {self.history_s} s)')
+        if low < earliest or high > latest:
+            return np.clip(times_ms, earliest, latest)
+        return times_ms
 
     @staticmethod
     def _markers_mm(th1: np.ndarray, th3: np.ndarray, l1_mm: np.ndarray) -> dict:
@@ -375,12 +381,17 @@ class _Strike:
             forces[~moving] = self.held.balance(self.drive.pulled_mm(times_ms[~moving]))[1]
             forces[self._free(world_ms)] = 0.0
         segments = self.sim.run_data.segments
-        index = self._segment_index(times_ms[moving])
+        simulated_ms = times_ms[moving]
+        index = self._segment_index(simulated_ms)
+        if index.size and index.min() == index.max():        # one segment: most blocks
+            knots_t, knots_f = self._tension_knots(segments[index[0]])
+            forces[moving] = np.interp(simulated_ms, knots_t, knots_f)
+            return forces
         simulated = np.empty(index.size)
         for i in np.unique(index):
             knots_t, knots_f = self._tension_knots(segments[i])
             mask = index == i
-            simulated[mask] = np.interp(times_ms[moving][mask], knots_t, knots_f)
+            simulated[mask] = np.interp(simulated_ms[mask], knots_t, knots_f)
         forces[moving] = simulated
         return forces
 
@@ -425,8 +436,18 @@ class _Strike:
         return world_ms >= self.free_from_ms
 
     def _segment_index(self, times_ms: np.ndarray) -> np.ndarray:
-        starts = [seg.t[0] for seg in self.sim.run_data.segments]
-        return np.searchsorted(starts, times_ms, side='right') - 1
+        """The segment each time falls in (-1 before the first). Only the segments from the
+        last one that starts at or before the earliest time are searched: the stream asks for
+        the newest few of the many kept."""
+        segments = self.sim.run_data.segments
+        first = len(segments) - 1
+        if times_ms.size:
+            earliest = times_ms.min()
+            while first > 0 and segments[first].t[0] > earliest:
+                first -= 1
+        first = max(first, 0)
+        starts = [seg.t[0] for seg in segments[first:]]
+        return np.searchsorted(starts, times_ms, side='right') - 1 + first
 
     def _hold(self) -> None:
         sim = self.sim

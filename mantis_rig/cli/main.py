@@ -60,6 +60,16 @@ def main(argv=None) -> int:
     """Run one command; the one place where its errors become a line and an exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    status = _run(args)
+    if argv is None and getattr(args, 'end_process', False):
+        # the command line's own `mantis trial` / `mantis bringup`: its stack is stopped, its
+        # log closed and rclpy shut down; the interpreter's teardown would only cost CPU
+        from mantis_rig.runtime.stopping import end_process
+        end_process(status)
+    return status
+
+
+def _run(args) -> int:
     try:
         return args.run(args) or 0
     except InputError as exc:     # bad input, named in the message: one line, no traceback

@@ -31,7 +31,8 @@ def add_commands(commands) -> None:
                        help='pull speed, mm/s (default: the scene\'s)')
     trial.add_argument('--timeout', type=float, default=600.0,
                        help='give up after this many seconds of wall time (default 600)')
-    trial.set_defaults(run=run_trial)
+    # end_process: the command line's process ends by os._exit once all is closed (cli.main)
+    trial.set_defaults(run=run_trial, end_process=True)
 
     bringup = commands.add_parser('bringup', help='start the node stack and wait for service '
                                   'calls (/supervisor/start_trial) until Ctrl-C',
@@ -39,7 +40,7 @@ def add_commands(commands) -> None:
     _stack_arguments(bringup)
     bringup.add_argument('--out', type=Path, default=Path('trials'),
                          help='directory for the trials\' bags (default trials/)')
-    bringup.set_defaults(run=run_bringup, pull_speed=None)
+    bringup.set_defaults(run=run_bringup, pull_speed=None, end_process=True)
 
 
 def _stack_arguments(parser) -> None:

@@ -22,7 +22,7 @@ from std_srvs.srv import Trigger
 from mantis_rig import backends, contract
 from mantis_rig.contract import FORCE_CEILING_NAME
 from mantis_rig.hardware.device_interfaces import DaqConfig, DeviceError
-from mantis_rig.nodes.device_node import ERROR, WARN, DeviceNode, time_msg
+from mantis_rig.nodes.device_node import ERROR, WARN, DeviceNode
 from mantis_rig.recording.force_block import force_block_to_msg
 from mantis_rig.runtime.executors import run_node
 
@@ -38,6 +38,8 @@ class LoadcellNode(DeviceNode):
                                                 c.FORCE_BLOCK.qos.publisher())
         self._wrench_pub = self.create_publisher(WrenchStamped, c.WRENCH.name,
                                                  c.WRENCH.qos.publisher())
+        self._wrench_msg = WrenchStamped()       # filled in for each window (reader thread)
+        self._wrench_msg.header.frame_id = 'loadcell'
         self._stage_velocity_pub = self.create_publisher(Float64, c.VELOCITY_COMMAND.name,
                                                          c.VELOCITY_COMMAND.qos.publisher())
         self._stage_stop = self.create_client(Trigger, c.STAGE_STOP.name,
@@ -48,6 +50,10 @@ class LoadcellNode(DeviceNode):
         self._stop = threading.Event()
         self._offset_ns = 0
         self._read_timeout_s = 2.0
+        # called with each published block's end (rig time, s) by the reader thread: the
+        # simulated world of this process, which paces itself by the stream (sim_rig), instead
+        # of a subscription of its own
+        self.on_block_published = None
         self._reset_counters()
 
     # --- lifecycle hooks --------------------------------------------------------------------
@@ -129,8 +135,11 @@ class LoadcellNode(DeviceNode):
         t0_ns = self._offset_ns + round(block.t0_s * 1e9)
         t0_s = t0_ns * 1e-9
         forces = np.asarray(block.force_n, dtype=np.float64)
-        self._block_pub.publish(force_block_to_msg(t0_ns / 1e9, round(block.period_s * 1e9) / 1e9,
-                                                   forces))
+        period_s = round(block.period_s * 1e9) / 1e9
+        self._block_pub.publish(force_block_to_msg(t0_ns / 1e9, period_s, forces))
+        published = self.on_block_published
+        if published is not None:
+            published(t0_ns / 1e9 + forces.size * period_s)
         self._blocks += 1
         self._samples += forces.size
         self._last_n = float(forces[-1])
@@ -151,11 +160,13 @@ class LoadcellNode(DeviceNode):
         centres = self._carry_t0_s + (np.arange(windows) * k + (k - 1) / 2) * period_s
         self._carry = samples[windows * k:]
         self._carry_t0_s += windows * k * period_s
-        for t_s, force in zip(centres, means):
-            msg = WrenchStamped()
-            msg.header.stamp = time_msg(t_s)
-            msg.header.frame_id = 'loadcell'
-            msg.wrench.force.x = float(force)
+        # one message, filled in and published for each window (publish serializes it at once);
+        # only the reader thread publishes wrenches
+        msg = self._wrench_msg
+        stamp = msg.header.stamp
+        for t_s, force in zip(centres.tolist(), means.tolist()):
+            stamp.sec, stamp.nanosec = divmod(round(t_s * 1e9), 1_000_000_000)
+            msg.wrench.force.x = force
             self._wrench_pub.publish(msg)
 
     def _check_ceiling(self, t0_s, period_s, forces) -> None:

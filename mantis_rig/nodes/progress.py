@@ -5,7 +5,9 @@ the stage's force guard) publishes ``progress`` (contract.PROGRESS, std_msgs/Hea
 names it, stamp is the rig time up to which it has heard the force stream and acted on it; a
 stamp of 0 says it waits for nothing now. On a busy machine the simulated world then slows
 down instead of running ahead of a starved consumer (mantis_rig.simulated.sim_world_node); on
-hardware nothing listens, and the messages cost a publish each.
+hardware nothing listens, and the messages cost a publish each. A consumer in the world's own
+process (sim_rig's stage guard; the supervisor of a one-process stack) reports by a direct call
+to the world instead (``ProgressReporter.report_to``).
 """
 from __future__ import annotations
 
@@ -28,12 +30,22 @@ class ProgressReporter:
         self._publisher = node.create_publisher(Header, contract.PROGRESS.name,
                                                 contract.PROGRESS.qos.publisher())
         self._sent_s: float | None = None
+        self._direct = None
+
+    def report_to(self, direct) -> None:
+        """Report by calling ``direct(frame_id, rig_time_s)`` instead of publishing: the
+        simulated world is in this process (sim_world_node.note_progress)."""
+        self._direct = direct
 
     def report(self, rig_time_s: float) -> None:
         last = self._sent_s
         if rig_time_s > 0.0 and last and last <= rig_time_s < last + PROGRESS_STEP_S:
             return
         self._sent_s = rig_time_s
+        direct = self._direct
+        if direct is not None:
+            direct(self._frame_id, rig_time_s)
+            return
         try:
             self._publisher.publish(Header(stamp=time_msg(rig_time_s), frame_id=self._frame_id))
         except RuntimeError:     # shutting down (its context gone): nothing waits for it then

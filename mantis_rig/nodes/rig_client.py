@@ -125,6 +125,11 @@ class RigClient:
         self.move_at(0.0)
         self.call(contract.STAGE_STOP.name, wait=False)
 
+    def report_progress_to(self, direct) -> None:
+        """The trial's progress goes to ``direct`` (the simulated world of this process), not
+        to /progress (mantis_rig.nodes.progress.ProgressReporter.report_to)."""
+        self._progress.report_to(direct)
+
     def report_progress(self, rig_time_s: float) -> None:
         self._progress.report(rig_time_s)
 

@@ -233,6 +233,11 @@ class StageNode(DeviceNode):
             stage.stop()
 
     # --- the force guard --------------------------------------------------------------------
+    def report_progress_to(self, direct) -> None:
+        """The force guard's progress goes to ``direct`` (the simulated world of this process)
+        rather than to /progress."""
+        self._guard_progress.report_to(direct)
+
     def _on_parameters_set(self, parameters) -> None:
         stage = self.device
         for parameter in parameters:

@@ -31,7 +31,9 @@ from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParam
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
+from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState, TimeReference
 from std_msgs.msg import Float64MultiArray, Header, String
 from std_srvs.srv import Trigger
@@ -134,6 +136,7 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, c.DIAGNOSTICS.name,
                                                       c.DIAGNOSTICS.qos.publisher())
         self.rig = RigClient(self, self._group, self._publish_state)
+        self._clock_node = self._follow_clock_aside()
         # The recorder's ~400 messages a second go through a lean node of their own: through
         # this node's executor (in one process shared with sim_world_node) they reached the
         # trial 0.1-0.5 s late, and the camera's buffer missed the strike.
@@ -170,6 +173,25 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
         self._heartbeat = threading.Thread(target=self._beat, name='supervisor-heartbeat',
                                            daemon=True)
         self._heartbeat.start()
+
+    def _follow_clock_aside(self) -> SideNode | None:
+        """On use_sim_time (the multi-process layout), rclpy's time source subscribes to
+        /clock on this node: each of the world's 100 steps a second then woke this node's
+        executor, which rebuilds its wait set in Python over every service, client and
+        subscription of the node. The subscription moves to a side node of its own on the
+        EventsExecutor, which feeds the same time source (the node's clock as before)."""
+        source = getattr(self, '_time_source', None)
+        subscription = getattr(source, '_clock_sub', None)
+        if subscription is None:            # wall time, or the world's shared clock: nothing
+            return None
+        side = SideNode(self, contract.CLOCK_SUFFIX)
+        # the topic as the time source resolved it (namespace, remapping) and its profile
+        side.node.create_subscription(ClockMsg, subscription.topic_name, source.clock_callback,
+                                      QoSProfile(depth=1,
+                                                 reliability=ReliabilityPolicy.BEST_EFFORT))
+        self.destroy_subscription(subscription)
+        source._clock_sub = None
+        return side
 
     # ------------------------------------------------------------------ parameters
     def _declare_parameters(self) -> None:
@@ -455,6 +477,9 @@ class SupervisorNode(WithoutDefaultEventHandlers, Node):
         if self._heartbeat is not threading.current_thread():
             self._heartbeat.join(timeout=1.0)
         self._recorder_node.close()
+        clock_node = getattr(self, '_clock_node', None)
+        if clock_node is not None:
+            clock_node.close()
         super().destroy_node()
 
     def shutdown_trial(self, reason: str = 'supervisor shutting down') -> None:

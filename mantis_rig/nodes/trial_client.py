@@ -34,6 +34,9 @@ from .supervisor_node import STATUS_NAME
 
 ANSWER_GRACE_S = 2.0    # how long an answer is awaited before the supervisor's publications count
 END_STATES = ('done', 'aborted')
+# How long wait_for_supervisor waits at a time for the supervisor's first diagnostics once its
+# service is up (between two calls of its ``alive()``)
+SUPERVISOR_HEARD_CHECK_S = 0.1
 
 
 def parameter_value(name: str, value) -> ParameterValue:
@@ -99,11 +102,20 @@ class TrialClient(WithoutDefaultEventHandlers, Node):
         trials a start is judged against); ``alive()`` may raise to stop waiting."""
         deadline = time.monotonic() + timeout_s
         while not self._start.wait_for_service(timeout_sec=0.5) or \
-                self.supervisor_trials is None:
+                not self._heard_supervisor(SUPERVISOR_HEARD_CHECK_S):
             alive()
             if time.monotonic() > deadline:
                 return False
         return True
+
+    def _heard_supervisor(self, timeout_s: float) -> bool:
+        """Whether the supervisor's diagnostics have been heard, waiting up to ``timeout_s``
+        for them (the service is up before its first status comes: without a wait, the loop
+        above spun, 0.7 CPU s of a multi-process trial's command line)."""
+        with self._changed:
+            if self.supervisor_trials is None:
+                self._changed.wait(timeout_s)
+            return self.supervisor_trials is not None
 
     def call(self, which: str, timeout_s: float = 30.0) -> tuple[bool, str]:
         """Call start_trial or abort; (success, message), or (False, why) on timeout. Without

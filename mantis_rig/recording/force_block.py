@@ -18,6 +18,8 @@ forces as ranges of a laser scan; one ``WrenchStamped`` per sample means 20,000 
 A dedicated ``mantis_rig_interfaces/msg/ForceBlock`` (Header + period + float64[]) is the clean
 long-term answer once the project has an interface package.
 """
+from array import array
+
 import numpy as np
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
@@ -37,10 +39,10 @@ def force_block_to_msg(t0_s, period_s, force_n) -> Float64MultiArray:
     msg.layout.data_offset = HEADER_ELEMENTS
     msg.layout.dim = [MultiArrayDimension(label=FORCE_LABEL, size=forces.size,
                                           stride=forces.size)]
-    data = np.empty(HEADER_ELEMENTS + forces.size)
-    data[0] = t0_s
-    data[1] = period_s
-    data[HEADER_ELEMENTS:] = forces
+    # the header, then the forces' bytes as they are: the message's own array type, filled
+    # without a Python float per sample (its setter copies anything else element by element)
+    data = array('d', (float(t0_s), float(period_s)))
+    data.frombytes(forces.tobytes())
     msg.data = data
     return msg
 

@@ -55,7 +55,7 @@ def summarize(path, release_jump_n: float = 1.0) -> TrialSummary:
               contract.TRIGGER_TIME)
     by_name = {contract.resolve(topic, summary.namespace): topic for topic in wanted}
     blocks, markers = [], []
-    for message in reader.messages():
+    for message in reader.messages(list(by_name)):     # not the wrenches and joint states
         t_s = message.log_time_ns * 1e-9
         topic = by_name.get(message.topic)
         if topic is contract.FORCE_BLOCK:

@@ -55,6 +55,12 @@ def threaded_executor(num_threads: int = 8, context=None):
 
 
 SPIN_CHECK_S = 0.1          # how often a Spinner looks at its stop flag
+# ... when its executor is one of rclpy's Python executors, which stop() wakes: each idle
+# wake-up makes a timer for the timeout and rebuilds the wait set in Python over all its nodes'
+# entities (some 40 services on the device nodes' executor), and the stop flag ends the wait
+# itself. (The EventsExecutor waits in C++, cheap when idle; its wake() does not end a
+# spin_once, so it keeps SPIN_CHECK_S.)
+PYTHON_SPIN_CHECK_S = 1.0
 
 
 class Spinner:
@@ -65,8 +71,9 @@ class Spinner:
     then died with "'NoneType' object has no attribute 'handle'", and callbacks still queued
     ran against destroyed nodes ("The following exception was never retrieved: cannot use
     Destroyable because destruction was requested"). Here the thread stops first (it spins in
-    slices of SPIN_CHECK_S), then the callbacks a MultiThreadedExecutor handed to its pool
-    finish, and only then is the executor shut down; its nodes can then be destroyed."""
+    slices of SPIN_CHECK_S, or PYTHON_SPIN_CHECK_S; stop() wakes it), then the callbacks a
+    MultiThreadedExecutor handed to its pool finish, and only then is the executor shut down;
+    its nodes can then be destroyed."""
 
     def __init__(self, executor, name: str):
         self.executor = executor
@@ -76,9 +83,16 @@ class Spinner:
         self._thread.start()
 
     def _run(self) -> None:
+        # rclpy's Python executors: spin once, or until the stop flag is set and stop()'s
+        # wake() has the wait look at it (as rclpy 7.1's spin_once_until_future_complete does
+        # with a future's done(), without a callback added to it at every call)
+        until_stopped = getattr(self.executor, '_spin_once_impl', None)
         while not self._stop.is_set():
             try:
-                self.executor.spin_once(timeout_sec=SPIN_CHECK_S)
+                if until_stopped is not None:
+                    until_stopped(PYTHON_SPIN_CHECK_S, self._stop.is_set)
+                else:
+                    self.executor.spin_once(timeout_sec=SPIN_CHECK_S)
             except (ExternalShutdownException, ShutdownException):
                 return
             except Exception as exc:      # noqa: BLE001 - one callback's bug: report, go on
@@ -86,6 +100,10 @@ class Spinner:
 
     def stop(self, timeout_s: float = 5.0) -> None:
         self._stop.set()
+        try:
+            self.executor.wake()            # out of its wait now, not at the slice's end
+        except Exception:                   # noqa: BLE001 - shut down already: it returns anyway
+            pass
         if self._thread is not threading.current_thread():
             self._thread.join(timeout_s)
         deadline = time.monotonic() + timeout_s

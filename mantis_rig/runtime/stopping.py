@@ -152,4 +152,21 @@ def watch_parent(parent_pid: int) -> threading.Thread:
     return thread
 
 
-__all__ = ['StopRequested', 'StopSignals', 'say', 'stop_reason', 'watch_parent']
+def end_process(status: int) -> None:
+    """End this process now with ``status``, its work done and closed (every node stopped and
+    destroyed, rclpy shut down, the log closed): os._exit after flushing stdout and stderr. The
+    interpreter's own teardown (every module and object freed, rclpy's and numba's finalizers,
+    DDS participants) costs CPU and, after an interrupt, seconds, and holds nothing that is
+    still to be written. Only for the command line's own `mantis trial` / `mantis bringup`
+    process (cli.main), never for a caller in the same process (the tests call cli.main with
+    argv) nor for a stack's node processes."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):       # closed, or its reader gone: nothing to keep
+            pass
+    os._exit(status)
+
+
+__all__ = ['StopRequested', 'StopSignals', 'end_process', 'say', 'stop_reason',
+           'watch_parent']

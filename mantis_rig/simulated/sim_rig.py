@@ -19,6 +19,7 @@ import sys
 
 from rclpy.parameter import Parameter
 
+from mantis_rig.contract import LOADCELL_NODE
 from mantis_rig.runtime.executors import (
     Spinner,
     light_executor,
@@ -63,6 +64,11 @@ class SimRig:
                     node_name=entry.name, context=context, namespace=namespace,
                     parameter_overrides=_overrides(values),
                     world_port=port, sim_clock=self.clock))
+            # the world paces itself by the load cell's stream and the force guard's progress:
+            # both in this process, told by direct calls, not through the pacing node
+            self.node(LOADCELL_NODE).on_block_published = \
+                self.world_node.take_force_stream_directly()
+            self.node(STAGE_NODE).report_progress_to(self.world_node.note_progress)
         except BaseException:
             self.destroy_node()
             raise

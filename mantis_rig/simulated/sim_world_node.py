@@ -2,17 +2,18 @@
 
 A thread advances the mantis_sim World by `step_s` of simulated time per step, paced at
 `real_time_factor` (0: as fast as it can; when a step is late, simulated time slips rather than
-catching up), and publishes /clock after each step. It waits while the load cell's force
-stream, or a consumer's progress (/progress: the supervisor's trial, the stage's force guard),
-lags it by more than `max_lead_s`. The simulated devices reach the world by
-direct calls (a LocalWorldPort on `runner`), in the same process: the node is one part of
-mantis_rig.simulated.sim_rig, the simulated rig. Once a wall second, /diagnostics gets the status
-`sim_world_node: world`, and at once whenever the robot on the latch changes (a re-latch, a
-rebuild at new conditions) (keys time_s, phase, peak_time_s, stage position/velocity, strikes:
-how often the robot was latched, latched, and what the current latching's robot was built
-from: d_t_mm, contact_angle_deg, medium, latch_offset_deg, latched_angle_deg). The `relatch`
-parameter says whether the simulated operator re-latches the robot once the stage is back at
-its start (mantis_sim.world).
+catching up), and publishes /clock after each step (while anything subscribes to it). It waits
+while the load cell's force stream, or a consumer's progress (/progress: the supervisor's
+trial, the stage's force guard), lags it by more than `max_lead_s`; the load cell node and a
+consumer in this process tell it by direct calls instead (`note_force_stream`,
+`note_progress`). The simulated devices reach the world by direct calls (a LocalWorldPort on
+`runner`), in the same process: the node is one part of mantis_rig.simulated.sim_rig, the
+simulated rig. Once a wall second, /diagnostics gets the status `sim_world_node: world`, and at
+once whenever the robot on the latch changes (a re-latch, a rebuild at new conditions) (keys
+time_s, phase, peak_time_s, stage position/velocity, strikes: how often the robot was latched,
+latched, and what the current latching's robot was built from: d_t_mm, contact_angle_deg,
+medium, latch_offset_deg, latched_angle_deg). The `relatch` parameter says whether the
+simulated operator re-latches the robot once the stage is back at its start (mantis_sim.world).
 
 The trial's conditions (contract.WORLD_CONDITIONS: d_t_mm, contact_angle_deg, medium; default
 the scene's own) are parameters: each latching's robot is the scene at them
@@ -101,9 +102,9 @@ class SimWorldNode(WithoutDefaultEventHandlers, Node):
         self._daq_heard = 0.0
         self.progress: dict[str, tuple[float, float]] = {}   # consumer: (rig s, heard at)
         self._pacing = SideNode(self, contract.PACING_SUFFIX)
-        self._pacing.node.create_subscription(Float64MultiArray, contract.FORCE_BLOCK.name,
-                                              self._on_daq_block,
-                                              contract.FORCE_BLOCK.qos.subscriber())
+        self._daq_subscription = self._pacing.node.create_subscription(
+            Float64MultiArray, contract.FORCE_BLOCK.name, self._on_daq_block,
+            contract.FORCE_BLOCK.qos.subscriber())
         self._pacing.node.create_subscription(Header, contract.PROGRESS.name,
                                               self._on_progress,
                                               contract.PROGRESS.qos.subscriber())
@@ -130,6 +131,27 @@ class SimWorldNode(WithoutDefaultEventHandlers, Node):
         self.progress[msg.frame_id] = (
             msg.stamp.sec + msg.stamp.nanosec * 1e-9, time.monotonic())
 
+    # --- consumers in this process (mantis_rig.simulated.sim_rig): direct calls, not topics --
+    def note_force_stream(self, end_s: float) -> None:
+        """The force stream has been published up to ``end_s`` (rig time), told by the load
+        cell node of this process right after it published the block."""
+        self._daq_end_s = end_s
+        self._daq_heard = time.monotonic()
+
+    def note_progress(self, consumer: str, rig_time_s: float) -> None:
+        """A consumer's progress (what /progress carries: frame_id, stamp), from a consumer in
+        this process."""
+        self.progress[consumer] = (rig_time_s, time.monotonic())
+
+    def take_force_stream_directly(self):
+        """The load cell node is in this process and reports each block's end itself
+        (note_force_stream): the pacing node's subscription to the force stream, one of the
+        stream's three deliveries in this process, goes. Returns note_force_stream."""
+        subscription, self._daq_subscription = self._daq_subscription, None
+        if subscription is not None:
+            self._pacing.node.destroy_subscription(subscription)
+        return self.note_force_stream
+
     def waiting_for_consumers(self) -> bool:
         """True while the force streams and lags the world by more than max_lead_s, or a
         consumer's progress does. A consumer not heard for STREAM_ALIVE_S (dead, frozen) is not
@@ -144,7 +166,11 @@ class SimWorldNode(WithoutDefaultEventHandlers, Node):
             for progress_s, heard in list(self.progress.values()))
 
     def publish_clock(self, msg: Clock) -> None:
-        self._clock_pub.publish(msg)
+        # only when something listens (the supervisor of the multi-process layout, a tool):
+        # /clock is volatile, so a message no subscription matches is lost anyway, and the
+        # nodes of this process follow the world's SharedSimClock instead
+        if self._clock_pub.get_subscription_count():
+            self._clock_pub.publish(msg)
 
     def _robot(self, latching: int):
         """The robot of a latching: the scene at the current conditions, drawn from its spread

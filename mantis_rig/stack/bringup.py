@@ -198,6 +198,8 @@ class Stack:
                 parameter_overrides=_overrides(supervisor_params))
             if self.rig is not None:
                 self.rig.clock.attach(supervisor)
+                # the trial's progress to the world of this process by a call, not /progress
+                supervisor.rig.report_progress_to(self.rig.world_node.note_progress)
             self._add(supervisor, self.executor)
         except BaseException:
             self.stop()

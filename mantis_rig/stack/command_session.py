@@ -9,12 +9,11 @@ from __future__ import annotations
 from collections.abc import Callable
 import contextlib
 import os
-import sys
 
 from mantis_rig.contract import START_TRIAL, resolve
 from mantis_rig.faults import StackError
 from mantis_rig.runtime.ros_env import claim_local_domain
-from mantis_rig.runtime.stopping import StopSignals
+from mantis_rig.runtime.stopping import StopSignals, end_process
 
 
 def ros_session(command: str, run: Callable[[StopSignals], int]) -> int:
@@ -37,9 +36,7 @@ def ros_session(command: str, run: Callable[[StopSignals], int]) -> int:
     if signals.first is not None:
         # Everything is stopped and closed; the interpreter's own teardown (DDS participants)
         # takes seconds more, which an interrupted operator should not wait for.
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(status)
+        end_process(status)
     return status
 
 
