@@ -37,6 +37,7 @@ SCENE = 'air_23mm_rig'
 TRIAL_TIMEOUT_S = 240.0
 FAST_RETURN = {STAGE_NODE: {'move_speed_m_per_s': 2.0e-3}}
 START_TOLERANCE_M = 0.1e-3            # the supervisor's position_tolerance_mm
+SLOW_PULL_MM_S = 0.05                 # an aborted pull's: the abort lands before the strike
 
 pytestmark = [pytest.mark.timeout(900), pytest.mark.slow, pytest.mark.ros]
 
@@ -125,7 +126,10 @@ def test_one_bring_up_many_trials_with_aborts_between(ros, tmp_path):
         assert summarize(bag).outcome['stage_returned'] == 'true'
         set_supervisor(client, FORCE_CEILING_NAME, 30.0)
         trial_done()
-        # the operator aborts a pull: the robot is still latched, the next trial strikes
+        # the operator aborts a pull (a slow one, so that the abort lands before the strike
+        # however fast the rig runs): the robot is still latched, the next trial strikes
+        pull_speed = client.get_parameters(['pull_speed_mm_s'])['pull_speed_mm_s']
+        set_supervisor(client, 'pull_speed_mm_s', SLOW_PULL_MM_S)
         ok, message = client.start_trial()
         assert ok, message
         found = client.wait_for_state(('pulling', 'done', 'aborted'), client.trial_start, 60.0)
@@ -135,6 +139,7 @@ def test_one_bring_up_many_trials_with_aborts_between(ros, tmp_path):
         bag = Path(message.rsplit('logging to ', 1)[1])
         assert wait_closed(bag, 30.0), f'{bag} was not closed'
         assert 'abort requested' in summarize(bag).outcome['reason']
+        set_supervisor(client, 'pull_speed_mm_s', pull_speed)
         trial_done()
     # every strike re-latched the robot: one latch more per strike that happened
     assert world_strikes[:3] == [2, 3, 4] and world_strikes[-1] == world_strikes[-2] + 1
