@@ -19,6 +19,7 @@ SLACK_N = 0.4                     # the tendon just taut (slack_force_n: 0.3 N)
 class TendonDaq(FakeDaqSystem):
     started = None
     released = False
+    latched = False           # the robot seen latched: the stage at or before the taut point
 
     def volts(self, task, samples):
         rate = task.timing.samp_clk_rate
@@ -39,11 +40,17 @@ def stage_mm() -> float:
 
 
 def tendon_v(index):
-    """Slack below the start + TAUT_MM; then SLACK_N plus a spring; 0 N for good once released."""
+    """Slack below the start + TAUT_MM; then SLACK_N plus a spring; 0 N once released by a pull
+    through RELEASE_MM, until the stage is back in the slack, where the person re-latches the
+    robot (as the simulated world's operator does). A load cell started with the stage beyond
+    the release point (a bring-up after a fault stopped the stage there) reads a latched robot
+    once the stage has returned into the slack, not a release it never saw."""
     stretch = stage_mm() - (hardware_rig.START_MM + hardware_rig.TAUT_MM)
-    if stretch > hardware_rig.RELEASE_MM:
+    if stretch < 0:
+        system.latched, system.released = True, False
+    elif stretch > hardware_rig.RELEASE_MM and system.latched:
         system.released = True
-    force = 0.0 if system.released or stretch < 0 else \
+    force = 0.0 if system.released or not system.latched or stretch < 0 else \
         SLACK_N + hardware_rig.K_N_PER_MM * stretch
     return np.full(np.shape(index), VOLTS_AT_REST + force / NEWTONS_PER_VOLT)
 
