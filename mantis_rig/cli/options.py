@@ -8,6 +8,7 @@ import re
 import sys
 
 from mantis_sim.errors import InputError
+from mantis_sim.studies.shared.finite_values import json_safe  # noqa: F401 - the commands'
 
 
 def err(command, text):
@@ -30,17 +31,6 @@ def check_spread_request(robots: int, scenes: dict, per: str = '') -> None:
     if missing:
         raise InputError(f'--spread: no spread in the scene of {", ".join(missing)}: fit one '
                          f'with `mantis identify --spread` (docs/spread.md)')
-
-
-def json_safe(value):
-    """``value`` with every non-finite float as None: JSON has no NaN or infinity."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [json_safe(v) for v in value]
-    return value
 
 
 # ------------------------------------------------------------- trial conditions, by hand

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import yaml
 
+from mantis_sim.studies.shared.finite_values import json_safe
+
 from . import spread_fit
 from .strike_inputs import StrikeInputs
 
@@ -23,7 +25,7 @@ def fit_and_write_spreads(inputs: StrikeInputs, latent: str, out: Path, mapper, 
     out.mkdir(parents=True, exist_ok=True)
     for group, (source, target) in files.items():
         doc = yaml.safe_load(source.read_text(encoding='utf-8'))
-        doc['spread'] = _finite(spreads[group].to_mapping())
+        doc['spread'] = json_safe(spreads[group].to_mapping())
         target.write_text(yaml.safe_dump(doc, sort_keys=False, width=100), encoding='utf-8')
     return {'latent': model.key,
             'means': {g: {'value': m, 'std_error': se} for g, (m, se) in model.means.items()},
@@ -34,17 +36,6 @@ def fit_and_write_spreads(inputs: StrikeInputs, latent: str, out: Path, mapper, 
                                        'sd': d.sd}
                             for d in next(iter(spreads.values())).discrepancy},
             'strike_latents': {x.strike.trial: x.value for x in latents}}
-
-
-def _finite(value):
-    """``value`` with every non-finite float as None (a scene file holds no NaN)."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_finite(v) for v in value]
-    return value
 
 
 def _std_error_text(value: float) -> str:
